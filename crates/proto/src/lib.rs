@@ -1,0 +1,32 @@
+//! Wire types of l3p: every message the system sends, the key expressions it sends them on, and the one
+//! codec that turns them into bytes.
+//!
+//! Main types: [`RolloutChunk`] (actor → learner), [`PolicyAnnounce`] and [`WeightsBlob`] (learner →
+//! actors), [`MetricsRecord`] (anyone → subscribers, JSON), the registry messages in [`registry`],
+//! [`RobotState`] and [`RobotCommand`] (robot ↔ deploy controller). Every message carries
+//! [`WIRE_VERSION`]; [`codec`] checks it before decoding the rest.
+//!
+//! Architecture invariants: key expressions are built only by [`keys`]; bytes are produced and parsed
+//! only by [`codec`]; this crate depends on no other project crate.
+
+pub mod codec;
+pub mod config;
+pub mod keys;
+mod messages;
+pub mod registry;
+mod validate;
+
+pub use messages::*;
+pub use validate::ValidationError;
+
+/// Version of the wire format. Bump it whenever a message's layout changes; a peer that sends another
+/// version gets a clear error instead of garbage.
+pub const WIRE_VERSION: u32 = 1;
+
+/// A message type that travels on the wire: it carries the version it was written with.
+pub trait WireMessage {
+    /// Short name used in error messages (`rollout chunk`, `robot state`, ...).
+    const NAME: &'static str;
+    /// The `wire_version` field of this message.
+    fn wire_version(&self) -> u32;
+}

@@ -1,0 +1,95 @@
+//! Chunk validation names the field and the index of what is wrong.
+
+use l3p_proto::*;
+
+fn chunk() -> RolloutChunk {
+    let mut c = RolloutChunk::zeros("run", "a1", "actor-0", 3, 2, 3, 4, 2);
+    c.action_stds.fill(1.0);
+    c
+}
+
+#[test]
+fn valid_chunk_passes() {
+    chunk().validate().unwrap();
+    chunk().validate_dims(4, 2).unwrap();
+}
+
+#[test]
+fn wrong_length_names_field_and_sizes() {
+    let mut c = chunk();
+    c.rewards.pop();
+    let err = c.validate().unwrap_err().to_string();
+    assert!(err.contains("`rewards`") && err.contains("5 values") && err.contains("need 6"), "{err}");
+}
+
+#[test]
+fn nan_names_field_index_and_position() {
+    let mut c = chunk();
+    // step 1, env 1, dim 2 of [3, 2, 4]
+    let index = 4 * 2 + 4 + 2;
+    c.observations[index] = f32::NAN;
+    let err = c.validate().unwrap_err().to_string();
+    assert!(err.contains("`observations`") && err.contains(&format!("index {index}")), "{err}");
+    assert!(err.contains("step 1, env 1, dim 2"), "{err}");
+
+    let mut c = chunk();
+    c.rewards[5] = f32::INFINITY;
+    let err = c.validate().unwrap_err().to_string();
+    assert!(err.contains("`rewards`") && err.contains("index 5"), "{err}");
+}
+
+#[test]
+fn non_positive_std_is_rejected() {
+    let mut c = chunk();
+    c.action_stds[3] = 0.0;
+    let err = c.validate().unwrap_err().to_string();
+    assert!(err.contains("`action_stds`") && err.contains("index 3"), "{err}");
+}
+
+#[test]
+fn dimension_mismatch_and_bad_names_are_rejected() {
+    let err = chunk().validate_dims(48, 12).unwrap_err().to_string();
+    assert!(err.contains("obs_dim") && err.contains("48"), "{err}");
+    let mut c = chunk();
+    c.robot = "a1/../x".into();
+    assert!(c.validate().unwrap_err().to_string().contains("invalid robot name"));
+    let mut c = chunk();
+    c.wire_version = 0;
+    assert!(c.validate().unwrap_err().to_string().contains("wire version 0"));
+    let mut c = chunk();
+    c.num_envs = 0;
+    assert!(c.validate().unwrap_err().to_string().contains("num_envs must be positive"));
+}
+
+#[test]
+fn overflowing_dimensions_are_an_error_not_a_panic() {
+    let mut c = chunk();
+    c.num_envs = u32::MAX;
+    c.steps = u32::MAX;
+    c.obs_dim = u32::MAX;
+    assert!(c.validate().is_err());
+}
+
+#[test]
+fn robot_state_checks_joint_count_and_quaternion() {
+    let state = RobotState {
+        wire_version: WIRE_VERSION,
+        robot_id: "dog-1".into(),
+        seq: 0,
+        stamp_ns: 0,
+        base_quat: [1.0, 0.0, 0.0, 0.0],
+        base_lin_vel: [0.0; 3],
+        base_ang_vel: [0.0; 3],
+        joint_pos: vec![0.0; 12],
+        joint_vel: vec![0.0; 12],
+        command: [0.0; 3],
+    };
+    state.validate(12).unwrap();
+    assert!(state.validate(16).unwrap_err().to_string().contains("joint_pos"));
+    let mut bad = state.clone();
+    bad.base_quat = [2.0, 0.0, 0.0, 0.0];
+    assert!(bad.validate(12).unwrap_err().to_string().contains("unit quaternion"));
+    let mut bad = state;
+    bad.joint_vel[7] = f32::NAN;
+    assert!(bad.validate(12).unwrap_err().to_string().contains("index 7"));
+}
