@@ -1,0 +1,922 @@
+//! Environment configuration of the locomotion task: what a user writes in TOML, and its resolution
+//! into concrete, validated numbers for one robot.
+//!
+//! Main types:
+//! - [`EnvConfig`]: the `[env]` section (serde, `deny_unknown_fields`, every key optional). Its
+//!   `Default` is the IsaacLab 2.1 rough-terrain velocity task (`velocity_env_cfg.py`), see
+//!   `reference/locomotion-env-and-ppo.md` §1–§2.
+//! - [`TerrainConfig`] (preset `flat | simple-rough | curriculum | paper` plus range overrides),
+//!   [`CommandConfig`], [`NoiseConfig`], [`TerminationConfig`], [`RewardParams`].
+//! - [`RewardScales`] with the IsaacLab per-robot tables ([`RewardScales::for_robot`]) and
+//!   [`RandomizationConfig`] ([`RandomizationConfig::for_robot`]); the TOML side holds
+//!   [`RewardOverrides`] / [`RandomizationOverrides`] (every field optional) that are applied on top of
+//!   the robot's table, so that setting one weight never silently resets the others to another robot's.
+//! - [`EnvConfig::resolve`] → [`TaskSpec`]: everything concrete for one robot, validated
+//!   ([`ConfigError`] names the key).
+
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+use crate::terrain::{SubTerrainParams, TerrainSpec, TerrainType, TypeProportions};
+
+/// Errors of configuration parsing and validation.
+#[derive(Debug, Error)]
+pub enum ConfigError {
+    /// TOML syntax error or unknown / misspelt key (the message names the key and line).
+    #[error("invalid env config: {0}")]
+    Toml(#[from] toml::de::Error),
+    /// A value is out of its valid range.
+    #[error("invalid env config value `{key}`: {reason}")]
+    Invalid { key: String, reason: String },
+}
+
+fn invalid(key: &str, reason: impl Into<String>) -> ConfigError {
+    ConfigError::Invalid {
+        key: key.to_string(),
+        reason: reason.into(),
+    }
+}
+
+/// Robot families that IsaacLab 2.1 configures differently.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RobotFamily {
+    /// A1, Go1, Go2 (`VEL/config/{a1,go1,go2}`).
+    Unitree,
+    /// ANYmal B/C/D (the base `velocity_env_cfg.py` values).
+    Anymal,
+    /// Spot (IsaacLab ships only a flat Spot task with its own reward set; see `TASK_NOTES.md`).
+    Spot,
+    /// Any other robot: the base `velocity_env_cfg.py` values.
+    Other,
+}
+
+impl RobotFamily {
+    /// Family of a robot name (case-insensitive; `-` and `_` equivalent: `anymal-c`, `ANYmal_C`).
+    pub fn from_name(name: &str) -> RobotFamily {
+        let n = name.trim().to_ascii_lowercase().replace('-', "_");
+        match n.as_str() {
+            "a1" | "go1" | "go2" | "unitree_a1" | "unitree_go1" | "unitree_go2" => {
+                RobotFamily::Unitree
+            }
+            "anymal_b" | "anymal_c" | "anymal_d" | "anymal" => RobotFamily::Anymal,
+            "spot" => RobotFamily::Spot,
+            _ => RobotFamily::Other,
+        }
+    }
+}
+
+/// Declares an "overrides" struct: the same fields as `$target`, each optional, applied on top of a
+/// per-robot table.
+macro_rules! overrides {
+    ($(#[$m:meta])* $name:ident for $target:ident { $($field:ident : $ty:ty),* $(,)? }) => {
+        $(#[$m])*
+        #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+        #[serde(deny_unknown_fields, default)]
+        pub struct $name {
+            $(#[allow(missing_docs)] pub $field: Option<$ty>,)*
+        }
+        impl $name {
+            /// Overwrites the fields of `base` that are set here.
+            pub fn apply(&self, base: &mut $target) {
+                $(if let Some(v) = &self.$field { base.$field = v.clone(); })*
+            }
+        }
+    };
+}
+
+// ---------------------------------------------------------------------------------------------
+// Terrain
+
+/// Terrain preset names.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum TerrainPreset {
+    /// Flat ground everywhere (IsaacLab flat tasks use a plane); no curriculum.
+    Flat,
+    /// Transfer-experiment ground: half the columns flat, half random rough with small noise
+    /// (0.02–0.05 m, step 0.02), modelled on IsaacLab's `COBBLESTONE_ROAD_CFG`; no curriculum.
+    SimpleRough,
+    /// IsaacLab 2.1 `ROUGH_TERRAINS_CFG` with the terrain-level curriculum (small-robot ranges for
+    /// A1/Go1/Go2 as in their `rough_env_cfg.py`).
+    #[default]
+    Curriculum,
+    /// The L3P paper's terrain table (larger upper bounds: stairs and boxes to 0.8 m, rough noise to
+    /// 0.3 m, slopes to 0.8) with the curriculum.
+    Paper,
+}
+
+/// `[env.terrain]`: layout, resolution and optional overrides of the preset's difficulty ranges.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TerrainConfig {
+    /// Which terrain set to build.
+    pub preset: TerrainPreset,
+    /// Difficulty levels (rows along x). IsaacLab: 10.
+    pub num_rows: usize,
+    /// Columns (along y); column → terrain type by proportions. IsaacLab: 20.
+    pub num_cols: usize,
+    /// Side of a square tile in metres. IsaacLab: 8.
+    pub tile_size: f32,
+    /// Height-grid spacing in metres (0.05 keeps stair risers within 5 cm; see `TASK_NOTES.md`).
+    pub horizontal_resolution: f32,
+    /// Flat border around the whole tile area in metres. IsaacLab: 20.
+    pub border_width: f32,
+    /// Initial levels are drawn from `0..=max_init_level`. IsaacLab: 5.
+    pub max_init_level: usize,
+    /// Seed of the terrain generator (boxes, rough noise, per-tile difficulty jitter).
+    pub seed: u64,
+    /// Override of the stairs (both kinds) step-height range `[lo, hi]` in metres.
+    pub stairs_step_height: Option<[f32; 2]>,
+    /// Override of the boxes grid-height range in metres.
+    pub boxes_height: Option<[f32; 2]>,
+    /// Override of the random-rough noise range in metres.
+    pub rough_noise: Option<[f32; 2]>,
+    /// Override of the random-rough noise step in metres.
+    pub rough_noise_step: Option<f32>,
+    /// Override of the slope range (both kinds), rise over run.
+    pub slope: Option<[f32; 2]>,
+    /// Override of the type proportions (normalised; column `j` gets the type whose cumulative
+    /// proportion first exceeds `j / num_cols + 0.001`).
+    pub proportions: Option<TypeProportions>,
+    /// Override of whether the terrain-level curriculum runs (default: on for `curriculum`/`paper`).
+    pub curriculum: Option<bool>,
+}
+
+impl Default for TerrainConfig {
+    fn default() -> Self {
+        TerrainConfig {
+            preset: TerrainPreset::Curriculum,
+            num_rows: 10,
+            num_cols: 20,
+            tile_size: 8.0,
+            horizontal_resolution: 0.05,
+            border_width: 20.0,
+            max_init_level: 5,
+            seed: 0,
+            stairs_step_height: None,
+            boxes_height: None,
+            rough_noise: None,
+            rough_noise_step: None,
+            slope: None,
+            proportions: None,
+            curriculum: None,
+        }
+    }
+}
+
+impl TerrainConfig {
+    /// A config with the given preset and all other keys at their defaults.
+    pub fn with_preset(preset: TerrainPreset) -> Self {
+        TerrainConfig {
+            preset,
+            ..Default::default()
+        }
+    }
+
+    /// Concrete generator input for `robot` (IsaacLab small-robot ranges for A1/Go1/Go2 in the
+    /// `curriculum` preset), validated.
+    pub fn resolve(&self, robot: &str) -> Result<TerrainSpec, ConfigError> {
+        let family = RobotFamily::from_name(robot);
+        let mut p = SubTerrainParams::isaaclab_rough();
+        let (mut proportions, mut curriculum) = (TypeProportions::isaaclab_rough(), true);
+        match self.preset {
+            TerrainPreset::Flat => {
+                proportions = TypeProportions::only(TerrainType::Flat);
+                curriculum = false;
+            }
+            TerrainPreset::SimpleRough => {
+                proportions = TypeProportions {
+                    flat: 0.5,
+                    random_rough: 0.5,
+                    ..TypeProportions::zero()
+                };
+                p.rough_noise = [0.02, 0.05];
+                p.rough_noise_step = 0.02;
+                curriculum = false;
+            }
+            TerrainPreset::Curriculum => {
+                if family == RobotFamily::Unitree {
+                    // VEL/config/{a1,go1,go2}/rough_env_cfg.py
+                    p.boxes_height = [0.025, 0.1];
+                    p.rough_noise = [0.01, 0.06];
+                    p.rough_noise_step = 0.01;
+                }
+            }
+            TerrainPreset::Paper => p = SubTerrainParams::paper(),
+        }
+        if let Some(v) = self.stairs_step_height {
+            p.stairs_step_height = v;
+        }
+        if let Some(v) = self.boxes_height {
+            p.boxes_height = v;
+        }
+        if let Some(v) = self.rough_noise {
+            p.rough_noise = v;
+        }
+        if let Some(v) = self.rough_noise_step {
+            p.rough_noise_step = v;
+        }
+        if let Some(v) = self.slope {
+            p.slope = v;
+        }
+        if let Some(v) = &self.proportions {
+            proportions = v.clone();
+        }
+        if let Some(v) = self.curriculum {
+            curriculum = v;
+        }
+        let spec = TerrainSpec {
+            num_rows: self.num_rows,
+            num_cols: self.num_cols,
+            tile_size: self.tile_size,
+            horizontal_resolution: self.horizontal_resolution,
+            border_width: self.border_width,
+            max_init_level: self.max_init_level,
+            seed: self.seed,
+            curriculum,
+            proportions,
+            params: p,
+        };
+        spec.validate()?;
+        Ok(spec)
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Commands, noise, terminations, reward parameters
+
+/// `[env.commands]`: IsaacLab `UniformVelocityCommandCfg` (`CommandsCfg.base_velocity`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CommandConfig {
+    /// Forward velocity range (m/s, base frame).
+    pub lin_vel_x: [f32; 2],
+    /// Lateral velocity range (m/s).
+    pub lin_vel_y: [f32; 2],
+    /// Yaw-rate range (rad/s); also the clip of the heading controller's output.
+    pub ang_vel_z: [f32; 2],
+    /// Target heading range (rad), used in heading mode.
+    pub heading: [f32; 2],
+    /// Heading mode: the yaw-rate command is `clip(stiffness · wrap(heading − yaw), ang_vel_z)`.
+    pub heading_command: bool,
+    /// Gain of the heading controller. IsaacLab: 0.5.
+    pub heading_stiffness: f32,
+    /// Fraction of resampled commands in heading mode. IsaacLab: 1.0.
+    pub rel_heading_envs: f32,
+    /// Fraction of resampled commands that are all-zero (standing). IsaacLab: 0.02.
+    pub rel_standing_envs: f32,
+    /// Resampling period drawn uniformly from this range (s). IsaacLab: (10, 10).
+    pub resampling_time_s: [f32; 2],
+}
+
+impl Default for CommandConfig {
+    fn default() -> Self {
+        CommandConfig {
+            lin_vel_x: [-1.0, 1.0],
+            lin_vel_y: [-1.0, 1.0],
+            ang_vel_z: [-1.0, 1.0],
+            heading: [-std::f32::consts::PI, std::f32::consts::PI],
+            heading_command: true,
+            heading_stiffness: 0.5,
+            rel_heading_envs: 1.0,
+            rel_standing_envs: 0.02,
+            resampling_time_s: [10.0, 10.0],
+        }
+    }
+}
+
+/// `[env.noise]`: additive uniform observation noise `U(−n, n)` in physical units (IsaacLab
+/// `ObservationsCfg.PolicyCfg`; no observation scaling).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NoiseConfig {
+    /// Master switch (`enable_corruption`).
+    pub enabled: bool,
+    /// Base linear velocity (m/s).
+    pub lin_vel: f32,
+    /// Base angular velocity (rad/s).
+    pub ang_vel: f32,
+    /// Projected gravity (unit vector components).
+    pub gravity: f32,
+    /// Joint position relative to default (rad).
+    pub joint_pos: f32,
+    /// Joint velocity (rad/s).
+    pub joint_vel: f32,
+    /// Height-scan samples (m), added before the ±1 clip.
+    pub height_scan: f32,
+}
+
+impl Default for NoiseConfig {
+    fn default() -> Self {
+        NoiseConfig {
+            enabled: true,
+            lin_vel: 0.1,
+            ang_vel: 0.2,
+            gravity: 0.05,
+            joint_pos: 0.01,
+            joint_vel: 1.5,
+            height_scan: 0.1,
+        }
+    }
+}
+
+/// `[env.termination]`: episode ends.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TerminationConfig {
+    /// Base (trunk) contact force norm above which the episode is terminated (N). IsaacLab: 1.0.
+    pub base_contact_threshold: f32,
+    /// Fall guard (not in IsaacLab): terminate when the base tilt (angle between the base z axis
+    /// and world up) exceeds this many radians. `None` disables it.
+    pub max_tilt_rad: Option<f32>,
+    /// Fall guard (not in IsaacLab): terminate when the base is less than this height above the
+    /// terrain under it (m). Robot-specific, so off by default.
+    pub min_base_height: Option<f32>,
+}
+
+impl Default for TerminationConfig {
+    fn default() -> Self {
+        TerminationConfig {
+            base_contact_threshold: 1.0,
+            max_tilt_rad: Some(1.4),
+            min_base_height: None,
+        }
+    }
+}
+
+/// `[env.reward_params]`: the kernels' constants (IsaacLab `RewardsCfg` params).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RewardParams {
+    /// Standard deviation of the tracking kernels, `exp(−err²/std²)`. IsaacLab: sqrt(0.25) = 0.5.
+    pub tracking_std: f32,
+    /// Feet air-time threshold (s). IsaacLab: 0.5.
+    pub air_time_threshold: f32,
+    /// Air-time reward is zero when `‖cmd_xy‖ ≤` this (m/s). IsaacLab: 0.1.
+    pub air_time_min_command: f32,
+    /// Contact force norm above which a foot or penalised body is in contact (N). IsaacLab: 1.0.
+    pub contact_threshold: f32,
+}
+
+impl Default for RewardParams {
+    fn default() -> Self {
+        RewardParams {
+            tracking_std: 0.5,
+            air_time_threshold: 0.5,
+            air_time_min_command: 0.1,
+            contact_threshold: 1.0,
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Rewards
+
+/// Reward weights. Each term is `weight · value · dt` with `dt` the policy step (0.02 s).
+/// Field names are IsaacLab's reward-term names.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RewardScales {
+    pub track_lin_vel_xy_exp: f32,
+    pub track_ang_vel_z_exp: f32,
+    pub lin_vel_z_l2: f32,
+    pub ang_vel_xy_l2: f32,
+    pub dof_torques_l2: f32,
+    pub dof_acc_l2: f32,
+    pub action_rate_l2: f32,
+    pub feet_air_time: f32,
+    pub undesired_contacts: f32,
+    pub flat_orientation_l2: f32,
+    pub dof_pos_limits: f32,
+}
+
+impl Default for RewardScales {
+    /// IsaacLab 2.1 base `RewardsCfg` (= ANYmal B/C/D rough).
+    fn default() -> Self {
+        RewardScales {
+            track_lin_vel_xy_exp: 1.0,
+            track_ang_vel_z_exp: 0.5,
+            lin_vel_z_l2: -2.0,
+            ang_vel_xy_l2: -0.05,
+            dof_torques_l2: -1.0e-5,
+            dof_acc_l2: -2.5e-7,
+            action_rate_l2: -0.01,
+            feet_air_time: 0.125,
+            undesired_contacts: -1.0,
+            flat_orientation_l2: 0.0,
+            dof_pos_limits: 0.0,
+        }
+    }
+}
+
+impl RewardScales {
+    /// IsaacLab 2.1 weights for `robot` on rough terrain (`rough = true`) or on the flat task.
+    ///
+    /// Sources (reference §1.5): `VEL/velocity_env_cfg.py` (base = ANYmal rough), `VEL/config/{a1,go1,go2}/
+    /// {rough,flat}_env_cfg.py`, `VEL/config/anymal_{b,c,d}/flat_env_cfg.py`. Spot and unknown robots
+    /// get the base table (IsaacLab's Spot reward set is a different family of terms; see TASK_NOTES).
+    pub fn for_robot(robot: &str, rough: bool) -> RewardScales {
+        let mut s = RewardScales::default();
+        match (RobotFamily::from_name(robot), rough) {
+            (RobotFamily::Unitree, true) => {
+                s.track_lin_vel_xy_exp = 1.5;
+                s.track_ang_vel_z_exp = 0.75;
+                s.dof_torques_l2 = -2.0e-4;
+                s.feet_air_time = 0.01;
+                s.undesired_contacts = 0.0;
+            }
+            (RobotFamily::Unitree, false) => {
+                s.track_lin_vel_xy_exp = 1.5;
+                s.track_ang_vel_z_exp = 0.75;
+                s.dof_torques_l2 = -2.0e-4;
+                s.feet_air_time = 0.25;
+                s.undesired_contacts = 0.0;
+                s.flat_orientation_l2 = -2.5;
+            }
+            (_, false) => {
+                s.flat_orientation_l2 = -5.0;
+                s.dof_torques_l2 = -2.5e-5;
+                s.feet_air_time = 0.5;
+            }
+            (_, true) => {}
+        }
+        s
+    }
+}
+
+overrides! {
+    /// `[env.rewards]`: per-term weight overrides on top of [`RewardScales::for_robot`].
+    RewardOverrides for RewardScales {
+        track_lin_vel_xy_exp: f32,
+        track_ang_vel_z_exp: f32,
+        lin_vel_z_l2: f32,
+        ang_vel_xy_l2: f32,
+        dof_torques_l2: f32,
+        dof_acc_l2: f32,
+        action_rate_l2: f32,
+        feet_air_time: f32,
+        undesired_contacts: f32,
+        flat_orientation_l2: f32,
+        dof_pos_limits: f32,
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Randomisation
+
+/// Domain randomisation and reset distribution (IsaacLab `EventCfg`). Ranges are `[lo, hi]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RandomizationConfig {
+    /// Static friction coefficient of the robot's bodies, drawn per episode (IsaacLab: 0.8 fixed).
+    pub static_friction: [f32; 2],
+    /// Dynamic friction coefficient (IsaacLab: 0.6 fixed).
+    pub dynamic_friction: [f32; 2],
+    /// Mass added to the base (kg).
+    pub added_base_mass: [f32; 2],
+    /// Half-ranges of a uniform base centre-of-mass shift (m), `None` = off.
+    pub base_com_offset: Option<[f32; 3]>,
+    /// Push interval range (s), drawn per push per env; `None` disables pushes.
+    pub push_interval_s: Option<[f32; 2]>,
+    /// Pushes set the base x and y velocity to `U(−v, v)` (m/s).
+    pub push_velocity_xy: f32,
+    /// Reset: base xy offset from the tile origin `U(−d, d)` (m).
+    pub reset_base_xy: f32,
+    /// Reset: base yaw `U(−y, y)` (rad).
+    pub reset_yaw: f32,
+    /// Reset: each of the 6 base velocity components `U(−v, v)` (m/s, rad/s).
+    pub reset_base_velocity: f32,
+    /// Reset: joint positions = default × `U(lo, hi)` (IsaacLab `reset_joints_by_scale`).
+    pub reset_joint_pos_scale: [f32; 2],
+}
+
+impl Default for RandomizationConfig {
+    /// IsaacLab 2.1 base (ANYmal) `EventCfg`.
+    fn default() -> Self {
+        RandomizationConfig {
+            static_friction: [0.8, 0.8],
+            dynamic_friction: [0.6, 0.6],
+            added_base_mass: [-5.0, 5.0],
+            base_com_offset: Some([0.05, 0.05, 0.01]),
+            push_interval_s: Some([10.0, 15.0]),
+            push_velocity_xy: 0.5,
+            reset_base_xy: 0.5,
+            reset_yaw: std::f32::consts::PI,
+            reset_base_velocity: 0.5,
+            reset_joint_pos_scale: [0.5, 1.5],
+        }
+    }
+}
+
+impl RandomizationConfig {
+    /// IsaacLab 2.1 per-robot events (reference §1.7): A1/Go1/Go2 use added mass (−1, 3), no CoM
+    /// shift, no pushes, joints reset at the default pose, zero reset velocities; Spot's flat cfg
+    /// uses friction (0.3–1.0 / 0.3–0.8), mass ±2.5 and pushes.
+    pub fn for_robot(robot: &str) -> RandomizationConfig {
+        let mut r = RandomizationConfig::default();
+        match RobotFamily::from_name(robot) {
+            RobotFamily::Unitree => {
+                r.added_base_mass = [-1.0, 3.0];
+                r.base_com_offset = None;
+                r.push_interval_s = None;
+                r.reset_joint_pos_scale = [1.0, 1.0];
+                r.reset_base_velocity = 0.0;
+            }
+            RobotFamily::Spot => {
+                r.static_friction = [0.3, 1.0];
+                r.dynamic_friction = [0.3, 0.8];
+                r.added_base_mass = [-2.5, 2.5];
+                r.base_com_offset = None;
+            }
+            RobotFamily::Anymal | RobotFamily::Other => {}
+        }
+        r
+    }
+}
+
+overrides! {
+    /// `[env.randomization]`: per-field overrides on top of [`RandomizationConfig::for_robot`].
+    RandomizationOverrides for RandomizationConfig {
+        static_friction: [f32; 2],
+        dynamic_friction: [f32; 2],
+        added_base_mass: [f32; 2],
+        base_com_offset: Option<[f32; 3]>,
+        push_interval_s: Option<[f32; 2]>,
+        push_velocity_xy: f32,
+        reset_base_xy: f32,
+        reset_yaw: f32,
+        reset_base_velocity: f32,
+        reset_joint_pos_scale: [f32; 2],
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// The env section and its resolution
+
+/// `[env]`: the locomotion task. Default = IsaacLab 2.1 rough velocity task.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EnvConfig {
+    /// Physics step (s). IsaacLab: 0.005.
+    pub sim_dt: f32,
+    /// Physics steps per policy step. IsaacLab: 4 (policy at 50 Hz).
+    pub decimation: u32,
+    /// Episode length (s); time-outs are `truncated`. IsaacLab: 20.
+    pub episode_length_s: f32,
+    /// Append the 187 height-scan samples to the 48 proprioceptive observations.
+    pub height_scan: bool,
+    /// Final clip of every observation entry (legged_gym `clip_observations`).
+    pub obs_clip: f32,
+    /// Clip of raw actions before use (legged_gym `clip_actions`; IsaacLab: none). Non-finite
+    /// actions are replaced by 0 regardless.
+    pub action_clip: f32,
+    pub terrain: TerrainConfig,
+    pub commands: CommandConfig,
+    pub noise: NoiseConfig,
+    pub termination: TerminationConfig,
+    pub reward_params: RewardParams,
+    pub rewards: RewardOverrides,
+    pub randomization: RandomizationOverrides,
+}
+
+impl Default for EnvConfig {
+    fn default() -> Self {
+        EnvConfig {
+            sim_dt: 0.005,
+            decimation: 4,
+            episode_length_s: 20.0,
+            height_scan: true,
+            obs_clip: 100.0,
+            action_clip: 100.0,
+            terrain: TerrainConfig::default(),
+            commands: CommandConfig::default(),
+            noise: NoiseConfig::default(),
+            termination: TerminationConfig::default(),
+            reward_params: RewardParams::default(),
+            rewards: RewardOverrides::default(),
+            randomization: RandomizationOverrides::default(),
+        }
+    }
+}
+
+/// Number of proprioceptive observations.
+pub const PROPRIO_OBS: usize = 48;
+/// Number of height-scan samples (17 × 11).
+pub const HEIGHT_SCAN_OBS: usize = 187;
+
+/// Everything concrete for one robot: what the task and the vectorised env run on.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TaskSpec {
+    /// Robot name the tables were resolved for.
+    pub robot: String,
+    pub sim_dt: f32,
+    pub decimation: u32,
+    /// Policy step `sim_dt · decimation` (s); the `dt` of the reward terms.
+    pub step_dt: f32,
+    pub episode_length_s: f32,
+    /// `ceil(episode_length_s / step_dt)` (IsaacLab `max_episode_length`): 1000 by default.
+    pub max_episode_steps: u32,
+    pub height_scan: bool,
+    /// 48 or 235.
+    pub obs_dim: usize,
+    pub obs_clip: f32,
+    pub action_clip: f32,
+    pub terrain: TerrainSpec,
+    pub commands: CommandConfig,
+    pub noise: NoiseConfig,
+    pub termination: TerminationConfig,
+    pub reward_params: RewardParams,
+    pub rewards: RewardScales,
+    pub randomization: RandomizationConfig,
+}
+
+fn check_range(key: &str, r: [f32; 2]) -> Result<(), ConfigError> {
+    if !r[0].is_finite() || !r[1].is_finite() || r[0] > r[1] {
+        return Err(invalid(
+            key,
+            format!(
+                "expected finite [lo, hi] with lo <= hi, got [{}, {}]",
+                r[0], r[1]
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn check_nonneg(key: &str, v: f32) -> Result<(), ConfigError> {
+    if !v.is_finite() || v < 0.0 {
+        return Err(invalid(
+            key,
+            format!("expected a finite value >= 0, got {v}"),
+        ));
+    }
+    Ok(())
+}
+
+fn check_pos(key: &str, v: f32) -> Result<(), ConfigError> {
+    if !v.is_finite() || v <= 0.0 {
+        return Err(invalid(
+            key,
+            format!("expected a finite value > 0, got {v}"),
+        ));
+    }
+    Ok(())
+}
+
+impl EnvConfig {
+    /// Parses an `[env]` table body (the keys of this struct at top level) strictly.
+    pub fn from_toml_str(text: &str) -> Result<EnvConfig, ConfigError> {
+        Ok(toml::from_str(text)?)
+    }
+
+    /// Whether the terrain preset is rough (selects IsaacLab's rough or flat reward table).
+    pub fn is_rough(&self) -> bool {
+        self.terrain.preset != TerrainPreset::Flat
+    }
+
+    /// Reward weights for `robot`: the IsaacLab table, then `[env.rewards]` overrides.
+    pub fn reward_scales(&self, robot: &str) -> RewardScales {
+        let mut s = RewardScales::for_robot(robot, self.is_rough());
+        self.rewards.apply(&mut s);
+        s
+    }
+
+    /// Randomisation for `robot`: the IsaacLab table, then `[env.randomization]` overrides.
+    pub fn randomization(&self, robot: &str) -> RandomizationConfig {
+        let mut r = RandomizationConfig::for_robot(robot);
+        self.randomization.apply(&mut r);
+        r
+    }
+
+    /// Resolves and validates everything for `robot`.
+    pub fn resolve(&self, robot: &str) -> Result<TaskSpec, ConfigError> {
+        check_pos("sim_dt", self.sim_dt)?;
+        if self.decimation == 0 {
+            return Err(invalid("decimation", "expected >= 1"));
+        }
+        check_pos("episode_length_s", self.episode_length_s)?;
+        check_pos("obs_clip", self.obs_clip)?;
+        check_pos("action_clip", self.action_clip)?;
+        let c = &self.commands;
+        check_range("commands.lin_vel_x", c.lin_vel_x)?;
+        check_range("commands.lin_vel_y", c.lin_vel_y)?;
+        check_range("commands.ang_vel_z", c.ang_vel_z)?;
+        check_range("commands.heading", c.heading)?;
+        check_range("commands.resampling_time_s", c.resampling_time_s)?;
+        check_pos("commands.resampling_time_s", c.resampling_time_s[0])?;
+        check_nonneg("commands.heading_stiffness", c.heading_stiffness)?;
+        for (k, v) in [
+            ("commands.rel_heading_envs", c.rel_heading_envs),
+            ("commands.rel_standing_envs", c.rel_standing_envs),
+        ] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(invalid(
+                    k,
+                    format!("expected a fraction in [0, 1], got {v}"),
+                ));
+            }
+        }
+        let n = &self.noise;
+        for (k, v) in [
+            ("noise.lin_vel", n.lin_vel),
+            ("noise.ang_vel", n.ang_vel),
+            ("noise.gravity", n.gravity),
+            ("noise.joint_pos", n.joint_pos),
+            ("noise.joint_vel", n.joint_vel),
+            ("noise.height_scan", n.height_scan),
+        ] {
+            check_nonneg(k, v)?;
+        }
+        let t = &self.termination;
+        check_nonneg(
+            "termination.base_contact_threshold",
+            t.base_contact_threshold,
+        )?;
+        if let Some(v) = t.max_tilt_rad {
+            check_pos("termination.max_tilt_rad", v)?;
+        }
+        if let Some(v) = t.min_base_height
+            && !v.is_finite()
+        {
+            return Err(invalid(
+                "termination.min_base_height",
+                "expected a finite value",
+            ));
+        }
+        let rp = &self.reward_params;
+        check_pos("reward_params.tracking_std", rp.tracking_std)?;
+        check_nonneg("reward_params.air_time_threshold", rp.air_time_threshold)?;
+        check_nonneg(
+            "reward_params.air_time_min_command",
+            rp.air_time_min_command,
+        )?;
+        check_nonneg("reward_params.contact_threshold", rp.contact_threshold)?;
+        let rewards = self.reward_scales(robot);
+        for (k, v) in rewards.named() {
+            if !v.is_finite() {
+                return Err(invalid(&format!("rewards.{k}"), "expected a finite weight"));
+            }
+        }
+        let rz = self.randomization(robot);
+        check_range("randomization.static_friction", rz.static_friction)?;
+        check_range("randomization.dynamic_friction", rz.dynamic_friction)?;
+        check_nonneg("randomization.static_friction", rz.static_friction[0])?;
+        check_nonneg("randomization.dynamic_friction", rz.dynamic_friction[0])?;
+        check_range("randomization.added_base_mass", rz.added_base_mass)?;
+        if let Some(p) = rz.push_interval_s {
+            check_range("randomization.push_interval_s", p)?;
+            check_pos("randomization.push_interval_s", p[0])?;
+        }
+        if let Some(o) = rz.base_com_offset {
+            for v in o {
+                check_nonneg("randomization.base_com_offset", v)?;
+            }
+        }
+        check_nonneg("randomization.push_velocity_xy", rz.push_velocity_xy)?;
+        check_nonneg("randomization.reset_base_xy", rz.reset_base_xy)?;
+        check_nonneg("randomization.reset_yaw", rz.reset_yaw)?;
+        check_nonneg("randomization.reset_base_velocity", rz.reset_base_velocity)?;
+        check_range(
+            "randomization.reset_joint_pos_scale",
+            rz.reset_joint_pos_scale,
+        )?;
+        let terrain = self.terrain.resolve(robot)?;
+        let step_dt = self.sim_dt * self.decimation as f32;
+        // IsaacLab: math.ceil(episode_length_s / step_dt) in doubles; 0.005f32 * 4 is slightly below
+        // 0.02, so a tolerance keeps 20 s at 1000 steps rather than 1001.
+        let steps = (self.episode_length_s as f64 / step_dt as f64 - 1e-4)
+            .ceil()
+            .max(1.0) as u32;
+        Ok(TaskSpec {
+            robot: robot.to_string(),
+            sim_dt: self.sim_dt,
+            decimation: self.decimation,
+            step_dt,
+            episode_length_s: self.episode_length_s,
+            max_episode_steps: steps,
+            height_scan: self.height_scan,
+            obs_dim: if self.height_scan {
+                PROPRIO_OBS + HEIGHT_SCAN_OBS
+            } else {
+                PROPRIO_OBS
+            },
+            obs_clip: self.obs_clip,
+            action_clip: self.action_clip,
+            terrain,
+            commands: self.commands.clone(),
+            noise: self.noise.clone(),
+            termination: self.termination.clone(),
+            reward_params: self.reward_params.clone(),
+            rewards,
+            randomization: rz,
+        })
+    }
+}
+
+impl RewardScales {
+    /// `(name, weight)` pairs in [`crate::task::RewardTerm`] order.
+    pub fn named(&self) -> [(&'static str, f32); 11] {
+        [
+            ("track_lin_vel_xy_exp", self.track_lin_vel_xy_exp),
+            ("track_ang_vel_z_exp", self.track_ang_vel_z_exp),
+            ("lin_vel_z_l2", self.lin_vel_z_l2),
+            ("ang_vel_xy_l2", self.ang_vel_xy_l2),
+            ("dof_torques_l2", self.dof_torques_l2),
+            ("dof_acc_l2", self.dof_acc_l2),
+            ("action_rate_l2", self.action_rate_l2),
+            ("feet_air_time", self.feet_air_time),
+            ("undesired_contacts", self.undesired_contacts),
+            ("flat_orientation_l2", self.flat_orientation_l2),
+            ("dof_pos_limits", self.dof_pos_limits),
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_is_isaaclab_rough_task() {
+        let spec = EnvConfig::default().resolve("anymal_c").unwrap();
+        assert_eq!(spec.max_episode_steps, 1000);
+        assert!((spec.step_dt - 0.02).abs() < 1e-7);
+        assert_eq!(spec.obs_dim, 235);
+        assert_eq!(spec.rewards, RewardScales::default());
+        assert_eq!(spec.terrain.num_rows, 10);
+        assert_eq!(spec.terrain.num_cols, 20);
+        assert_eq!(spec.terrain.params.stairs_step_height, [0.05, 0.23]);
+        assert_eq!(spec.terrain.params.slope, [0.0, 0.4]);
+        assert!(spec.terrain.curriculum);
+        assert_eq!(spec.randomization.push_interval_s, Some([10.0, 15.0]));
+    }
+
+    #[test]
+    fn unitree_tables_differ_from_base() {
+        let rough = RewardScales::for_robot("A1", true);
+        assert_eq!(rough.track_lin_vel_xy_exp, 1.5);
+        assert_eq!(rough.feet_air_time, 0.01);
+        assert_eq!(rough.undesired_contacts, 0.0);
+        assert_eq!(rough.dof_torques_l2, -2.0e-4);
+        let flat = RewardScales::for_robot("go2", false);
+        assert_eq!(flat.feet_air_time, 0.25);
+        assert_eq!(flat.flat_orientation_l2, -2.5);
+        let anymal_flat = RewardScales::for_robot("anymal-d", false);
+        assert_eq!(anymal_flat.flat_orientation_l2, -5.0);
+        assert_eq!(anymal_flat.feet_air_time, 0.5);
+        assert_eq!(anymal_flat.undesired_contacts, -1.0);
+        let r = RandomizationConfig::for_robot("go1");
+        assert_eq!(r.push_interval_s, None);
+        assert_eq!(r.added_base_mass, [-1.0, 3.0]);
+        let t = TerrainConfig::default().resolve("a1").unwrap();
+        assert_eq!(t.params.boxes_height, [0.025, 0.1]);
+        assert_eq!(t.params.rough_noise, [0.01, 0.06]);
+    }
+
+    #[test]
+    fn toml_overrides_apply_on_top_of_robot_table() {
+        let cfg = EnvConfig::from_toml_str(
+            r#"
+            height_scan = false
+            [terrain]
+            preset = "paper"
+            [rewards]
+            feet_air_time = 0.3
+            [randomization]
+            push_interval_s = [5.0, 6.0]
+            "#,
+        )
+        .unwrap();
+        let spec = cfg.resolve("a1").unwrap();
+        assert_eq!(spec.obs_dim, 48);
+        assert_eq!(spec.rewards.feet_air_time, 0.3);
+        assert_eq!(
+            spec.rewards.track_lin_vel_xy_exp, 1.5,
+            "other weights keep the A1 table"
+        );
+        assert_eq!(spec.randomization.push_interval_s, Some([5.0, 6.0]));
+        assert_eq!(spec.randomization.added_base_mass, [-1.0, 3.0]);
+        assert_eq!(spec.terrain.params.stairs_step_height, [0.05, 0.8]);
+    }
+
+    #[test]
+    fn misspelt_key_is_an_error_naming_it() {
+        let err = EnvConfig::from_toml_str("[commands]\nheading_stifness = 0.5\n").unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.contains("heading_stifness"), "{msg}");
+        let err = EnvConfig::from_toml_str("[rewards]\nfeet_airtime = 1.0\n").unwrap_err();
+        assert!(err.to_string().contains("feet_airtime"), "{err}");
+    }
+
+    #[test]
+    fn bad_values_are_named() {
+        let mut cfg = EnvConfig::default();
+        cfg.commands.lin_vel_x = [1.0, -1.0];
+        let err = cfg.resolve("a1").unwrap_err().to_string();
+        assert!(err.contains("commands.lin_vel_x"), "{err}");
+        let mut cfg = EnvConfig::default();
+        cfg.terrain.horizontal_resolution = 0.0;
+        let err = cfg.resolve("a1").unwrap_err().to_string();
+        assert!(err.contains("horizontal_resolution"), "{err}");
+    }
+}
