@@ -102,8 +102,13 @@ pub enum LineageRole {
 }
 
 impl LineageRole {
-    pub const ALL: [LineageRole; 5] =
-        [Self::TrainedAgainst, Self::FrozenCore, Self::FromCheckpoint, Self::InitialisedFrom, Self::DerivedFrom];
+    pub const ALL: [LineageRole; 5] = [
+        Self::TrainedAgainst,
+        Self::FrozenCore,
+        Self::FromCheckpoint,
+        Self::InitialisedFrom,
+        Self::DerivedFrom,
+    ];
 
     pub fn as_str(self) -> &'static str {
         match self {
@@ -142,7 +147,9 @@ impl FromStr for LineageRole {
 
 /// A reference that could not be parsed, or a name / alias that is not allowed.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("invalid artifact reference {input:?}: {reason}\nhint: write <name>@<version|alias>, e.g. a1-core@3 or a1-core@latest")]
+#[error(
+    "invalid artifact reference {input:?}: {reason}\nhint: write <name>@<version|alias>, e.g. a1-core@3 or a1-core@latest"
+)]
 pub struct RefError {
     pub input: String,
     pub reason: String,
@@ -216,7 +223,8 @@ impl FromStr for ArtifactRef {
 
 /// Check an artifact name: a valid key segment (letters, digits, `-`, `_`, `.`, at most 64).
 pub fn validate_name(name: &str) -> Result<(), RefError> {
-    validate_segment("artifact", name).map_err(|e| RefError { input: name.to_string(), reason: e.reason.into() })
+    validate_segment("artifact", name)
+        .map_err(|e| RefError { input: name.to_string(), reason: e.reason.into() })
 }
 
 /// Check an alias: a valid key segment that does not look like a version number (`3`, `v3`).
