@@ -1,0 +1,1 @@
+//! The `l3p bench learner` workload (filled in below).

@@ -1,0 +1,849 @@
+//! PPO as rsl_rl (`algorithms/ppo.py`), plus the L3P recovery losses, for one or several robots.
+//!
+//! Main types: [`PpoConfig`] (every hyperparameter, rsl_rl defaults), [`Mode`], [`Ppo`] (model +
+//! Adam + learning rate + iteration; [`Ppo::update`]), [`UpdateMetrics`].
+//!
+//! One update reads top to bottom:
+//! 1. values `V(s_t)` and `V(s_T)` of the batch under the current critic;
+//! 2. GAE with time-out bootstrapping ([`crate::gae`]), advantages normalised per robot over the
+//!    whole batch (rsl_rl normalises over its batch; one robot = one batch);
+//! 3. `R_obs` reconstruction error on observations not trained on yet (the fresh batch);
+//! 4. one random permutation per robot, reused by every epoch (rsl_rl); `epochs × minibatches`:
+//!    each minibatch takes the k-th slice of every robot's permutation, runs every robot through its
+//!    adapters and the shared core, computes the KL to the behaviour policy and adapts the learning
+//!    rate *before* the step, the clipped surrogate, the clipped value loss, the entropy bonus and
+//!    `λ (L_rec_obs + L_rec_act)`, back-propagates, clips the global gradient norm and steps Adam.
+
+use std::time::Instant;
+
+use burn::module::{Module, ModuleVisitor, Param, ParamId};
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::tensor::{Device, Tensor, TensorData};
+use l3p_policy::{
+    Arch, PolicyModel, PolicyNet, gaussian_entropy, gaussian_log_prob, tensor_to_vec,
+};
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use rand::seq::SliceRandom;
+use serde::{Deserialize, Serialize};
+
+use crate::LearnerError;
+use crate::gae::{compute_gae, explained_variance, normalize};
+use crate::storage::RolloutBatch;
+
+/// Training mode (paper baselines).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Mode {
+    /// MLP from scratch.
+    Mlp,
+    /// L3P, every module trained.
+    #[default]
+    L3p,
+    /// MLP initialised from an MLP checkpoint, everything trained.
+    MlpTransfer,
+    /// L3P with the core loaded from a checkpoint and frozen: adapters and critics train.
+    L3pTransfer,
+}
+
+impl Mode {
+    pub fn arch(self) -> Arch {
+        match self {
+            Mode::Mlp | Mode::MlpTransfer => Arch::Mlp,
+            Mode::L3p | Mode::L3pTransfer => Arch::L3p,
+        }
+    }
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Mode::Mlp => "mlp",
+            Mode::L3p => "l3p",
+            Mode::MlpTransfer => "mlp-transfer",
+            Mode::L3pTransfer => "l3p-transfer",
+        }
+    }
+}
+
+impl std::str::FromStr for Mode {
+    type Err = LearnerError;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Ok(match s {
+            "mlp" => Mode::Mlp,
+            "l3p" => Mode::L3p,
+            "mlp-transfer" => Mode::MlpTransfer,
+            "l3p-transfer" => Mode::L3pTransfer,
+            other => {
+                return Err(LearnerError::Config(format!(
+                    "unknown mode {other}\nhint: one of mlp, l3p, mlp-transfer, l3p-transfer"
+                )));
+            }
+        })
+    }
+}
+
+/// Learning-rate schedule.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum Schedule {
+    /// rsl_rl `adaptive`: move the lr by `lr_factor` to keep the KL near `desired_kl`.
+    #[default]
+    Adaptive,
+    Fixed,
+}
+
+/// PPO hyperparameters; defaults are rsl_rl's locomotion values (legged_gym / IsaacLab 2.1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PpoConfig {
+    pub mode: Mode,
+    pub num_learning_epochs: usize,
+    pub num_mini_batches: usize,
+    pub clip_param: f32,
+    pub gamma: f32,
+    pub lam: f32,
+    pub value_loss_coef: f32,
+    pub use_clipped_value_loss: bool,
+    pub entropy_coef: f32,
+    pub learning_rate: f64,
+    pub schedule: Schedule,
+    pub desired_kl: f32,
+    pub lr_min: f64,
+    pub lr_max: f64,
+    pub lr_factor: f64,
+    pub max_grad_norm: f32,
+    /// Adam ε; PyTorch's default 1e-8 (burn's default is 1e-5).
+    pub adam_epsilon: f32,
+    /// Seed of minibatch shuffling and diffusion noise.
+    pub seed: u64,
+}
+
+impl Default for PpoConfig {
+    fn default() -> Self {
+        Self {
+            mode: Mode::L3p,
+            num_learning_epochs: 5,
+            num_mini_batches: 4,
+            clip_param: 0.2,
+            gamma: 0.99,
+            lam: 0.95,
+            value_loss_coef: 1.0,
+            use_clipped_value_loss: true,
+            entropy_coef: 0.01,
+            learning_rate: 1e-3,
+            schedule: Schedule::Adaptive,
+            desired_kl: 0.01,
+            lr_min: 1e-5,
+            lr_max: 1e-2,
+            lr_factor: 1.5,
+            max_grad_norm: 1.0,
+            adam_epsilon: 1e-8,
+            seed: 1,
+        }
+    }
+}
+
+impl PpoConfig {
+    pub fn validate(&self) -> Result<(), LearnerError> {
+        let bad = |m: &str| Err(LearnerError::Config(m.to_string()));
+        if self.num_learning_epochs == 0 || self.num_mini_batches == 0 {
+            return bad("num_learning_epochs and num_mini_batches must be positive");
+        }
+        if !(self.learning_rate > 0.0 && self.lr_min > 0.0 && self.lr_min <= self.lr_max) {
+            return bad("need learning_rate > 0 and 0 < lr_min <= lr_max");
+        }
+        if !(0.0..=1.0).contains(&self.gamma) || !(0.0..=1.0).contains(&self.lam) {
+            return bad("gamma and lam must be in [0, 1]");
+        }
+        if !(self.clip_param > 0.0 && self.max_grad_norm > 0.0 && self.lr_factor > 1.0) {
+            return bad("clip_param and max_grad_norm must be positive, lr_factor > 1");
+        }
+        Ok(())
+    }
+
+    /// rsl_rl's adaptive rule: `kl > 2·target → lr / factor` (floored at `lr_min`),
+    /// `0 < kl < target / 2 → lr · factor` (capped at `lr_max`).
+    pub fn adapt_lr(&self, lr: f64, kl: f32) -> f64 {
+        if self.schedule != Schedule::Adaptive || !kl.is_finite() {
+            return lr;
+        }
+        let target = self.desired_kl;
+        if kl > 2.0 * target {
+            (lr / self.lr_factor).max(self.lr_min)
+        } else if kl > 0.0 && kl < target / 2.0 {
+            (lr * self.lr_factor).min(self.lr_max)
+        } else {
+            lr
+        }
+    }
+}
+
+/// What one update did (means over all minibatches unless noted).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct UpdateMetrics {
+    pub iteration: u64,
+    pub samples: usize,
+    pub approx_kl: f32,
+    pub clip_fraction: f32,
+    /// Of the critic's values at the start of the update against the GAE returns.
+    pub explained_variance: f32,
+    /// Learning rate after the update.
+    pub learning_rate: f64,
+    pub entropy: f32,
+    pub mean_std: f32,
+    pub surrogate_loss: f32,
+    pub value_loss: f32,
+    pub rec_obs_loss: f32,
+    pub rec_act_loss: f32,
+    pub total_loss: f32,
+    /// Global gradient norm before clipping (mean over minibatches).
+    pub grad_norm: f32,
+    /// MSE between observations and `R_obs` samples given `h`, on observations of this batch taken
+    /// before any gradient step (NaN when there is no `R_obs`).
+    pub recon_mse: f32,
+    /// Variance of those observations (the MSE of predicting their mean), for scale.
+    pub recon_baseline_mse: f32,
+    pub mean_reward: f32,
+    pub update_seconds: f32,
+    pub samples_per_second: f32,
+}
+
+/// Per-robot data prepared for minibatching.
+struct Prepared {
+    robot: usize,
+    n: usize,
+    obs_dim: usize,
+    act_dim: usize,
+    adv: Vec<f32>,
+    ret: Vec<f32>,
+    values: Vec<f32>,
+    perm: Vec<usize>,
+}
+
+/// The PPO learner state.
+pub struct Ppo {
+    cfg: PpoConfig,
+    model: PolicyModel,
+    optim: ModuleOptimizer,
+    device: Device,
+    lr: f64,
+    iteration: u64,
+    rng: StdRng,
+}
+
+impl std::fmt::Debug for Ppo {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Ppo")
+            .field("cfg", &self.cfg)
+            .field("lr", &self.lr)
+            .field("iteration", &self.iteration)
+            .finish_non_exhaustive()
+    }
+}
+
+fn adam(cfg: &PpoConfig) -> ModuleOptimizer {
+    AdamConfig::new().with_epsilon(cfg.adam_epsilon).init()
+}
+
+impl Ppo {
+    /// A learner for `model` (built on an autodiff device, e.g. [`l3p_policy::train_device`]). In
+    /// `l3p-transfer` the core is frozen here.
+    pub fn new(cfg: PpoConfig, model: PolicyModel, device: Device) -> Result<Self, LearnerError> {
+        cfg.validate()?;
+        if model.config.arch != cfg.mode.arch() {
+            return Err(LearnerError::Config(format!(
+                "mode {} needs a {} model, got {}",
+                cfg.mode.as_str(),
+                cfg.mode.arch(),
+                model.config.arch
+            )));
+        }
+        let model = if cfg.mode == Mode::L3pTransfer {
+            model.freeze_core()
+        } else {
+            model
+        };
+        let optim = adam(&cfg);
+        let lr = cfg.learning_rate;
+        let rng = StdRng::seed_from_u64(cfg.seed);
+        Ok(Self {
+            cfg,
+            model,
+            optim,
+            device,
+            lr,
+            iteration: 0,
+            rng,
+        })
+    }
+
+    pub fn config(&self) -> &PpoConfig {
+        &self.cfg
+    }
+
+    pub fn model(&self) -> &PolicyModel {
+        &self.model
+    }
+
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    pub fn learning_rate(&self) -> f64 {
+        self.lr
+    }
+
+    pub fn set_learning_rate(&mut self, lr: f64) {
+        self.lr = lr;
+    }
+
+    /// Number of updates done (restored from checkpoints).
+    pub fn iteration(&self) -> u64 {
+        self.iteration
+    }
+
+    /// Checkpoint: model + Adam state + iteration + learning rate and mode.
+    pub fn checkpoint_bytes(&self) -> Result<Vec<u8>, LearnerError> {
+        let optim = self
+            .optim
+            .into_bytes()
+            .map_err(|e| LearnerError::Checkpoint(format!("optimiser state: {e}")))?;
+        let learner =
+            serde_json::json!({ "learning_rate": self.lr, "mode": self.cfg.mode.as_str() });
+        Ok(l3p_policy::checkpoint_to_bytes(
+            &self.model,
+            &optim,
+            self.iteration,
+            learner,
+        )?)
+    }
+
+    /// Resume from [`checkpoint_bytes`](Self::checkpoint_bytes): model, optimiser state, iteration
+    /// and learning rate.
+    pub fn from_checkpoint_bytes(
+        cfg: PpoConfig,
+        bytes: &[u8],
+        device: Device,
+    ) -> Result<Self, LearnerError> {
+        let ck = l3p_policy::checkpoint_from_bytes(bytes, &device)?;
+        let mut ppo = Ppo::new(cfg, ck.model, device)?;
+        if !ck.optimizer.is_empty() {
+            ppo.optim = adam(&ppo.cfg)
+                .from_bytes(burn::tensor::Bytes::from_bytes_vec(ck.optimizer))
+                .map_err(|e| LearnerError::Checkpoint(format!("optimiser state: {e}")))?;
+        }
+        ppo.iteration = ck.iteration;
+        if let Some(lr) = ck.learner.get("learning_rate").and_then(|v| v.as_f64()) {
+            ppo.lr = lr;
+        }
+        Ok(ppo)
+    }
+
+    pub fn save(&self, path: &std::path::Path) -> Result<(), LearnerError> {
+        let bytes = self.checkpoint_bytes()?;
+        let tmp = path.with_extension("tmp");
+        std::fs::write(&tmp, &bytes)
+            .and_then(|_| std::fs::rename(&tmp, path))
+            .map_err(|e| LearnerError::Checkpoint(format!("{}: {e}", path.display())))
+    }
+
+    pub fn load(
+        cfg: PpoConfig,
+        path: &std::path::Path,
+        device: Device,
+    ) -> Result<Self, LearnerError> {
+        let bytes = std::fs::read(path)
+            .map_err(|e| LearnerError::Checkpoint(format!("{}: {e}", path.display())))?;
+        Self::from_checkpoint_bytes(cfg, &bytes, device)
+    }
+
+    /// Export one robot's deployable policy (safetensors + JSON config in one blob).
+    pub fn export(&self, robot: &str) -> Result<(Vec<u8>, l3p_policy::ExportConfig), LearnerError> {
+        Ok(l3p_policy::export_bytes(&self.model, robot)?)
+    }
+
+    fn tensor2(&self, v: Vec<f32>, rows: usize, cols: usize) -> Tensor<2> {
+        Tensor::from_data(TensorData::new(v, [rows, cols]), &self.device)
+    }
+
+    fn tensor1(&self, v: Vec<f32>) -> Tensor<1> {
+        let n = v.len();
+        Tensor::from_data(TensorData::new(v, [n]), &self.device)
+    }
+
+    /// Critic values for many observations, without autodiff.
+    fn values(
+        &self,
+        net: &PolicyNet,
+        robot: usize,
+        obs: &[f32],
+        obs_dim: usize,
+    ) -> Result<Vec<f32>, LearnerError> {
+        let n = obs.len() / obs_dim;
+        let x = self.tensor2(obs.to_vec(), n, obs_dim).inner();
+        Ok(tensor_to_vec(net.robots[robot].value(x))?)
+    }
+
+    /// One PPO update on `batch` (see the module docs for the order of operations).
+    pub fn update(&mut self, batch: &RolloutBatch) -> Result<UpdateMetrics, LearnerError> {
+        let start = Instant::now();
+        let cfg = self.cfg.clone();
+        if batch.robots.is_empty() {
+            return Err(LearnerError::Batch("empty batch".into()));
+        }
+        // Validate and map robots.
+        let mut index = Vec::with_capacity(batch.robots.len());
+        for (k, r) in batch.robots.iter().enumerate() {
+            r.validate()?;
+            let i = self.model.robot_index(&r.robot)?;
+            let spec = &self.model.robots[i];
+            if spec.obs_dim != r.obs_dim || spec.action_dim != r.action_dim {
+                return Err(LearnerError::Batch(format!(
+                    "robot {}: batch has obs {} / action {}, model expects obs {} / action {}",
+                    r.robot, r.obs_dim, r.action_dim, spec.obs_dim, spec.action_dim
+                )));
+            }
+            if batch.robots[..k].iter().any(|o| o.robot == r.robot) {
+                return Err(LearnerError::Batch(format!(
+                    "robot {} appears twice in the batch",
+                    r.robot
+                )));
+            }
+            if r.samples() < cfg.num_mini_batches {
+                return Err(LearnerError::Batch(format!(
+                    "robot {}: {} samples cannot fill {} minibatches",
+                    r.robot,
+                    r.samples(),
+                    cfg.num_mini_batches
+                )));
+            }
+            index.push(i);
+        }
+
+        // 1-2. Values, GAE, advantage normalisation.
+        let net_eval = self.model.net.valid();
+        let mut prepared = Vec::with_capacity(batch.robots.len());
+        let (mut ev_values, mut ev_returns) = (Vec::new(), Vec::new());
+        for (r, &i) in batch.robots.iter().zip(&index) {
+            let values = self.values(&net_eval, i, &r.observations, r.obs_dim)?;
+            let last = self.values(&net_eval, i, &r.last_observations, r.obs_dim)?;
+            let (mut adv, ret) = compute_gae(
+                &r.rewards,
+                &values,
+                &last,
+                &r.terminated,
+                &r.truncated,
+                r.steps,
+                r.envs,
+                cfg.gamma,
+                cfg.lam,
+            );
+            normalize(&mut adv);
+            ev_values.extend_from_slice(&values);
+            ev_returns.extend_from_slice(&ret);
+            let mut perm: Vec<usize> = (0..r.samples()).collect();
+            perm.shuffle(&mut self.rng);
+            prepared.push(Prepared {
+                robot: i,
+                n: r.samples(),
+                obs_dim: r.obs_dim,
+                act_dim: r.action_dim,
+                adv,
+                ret,
+                values,
+                perm,
+            });
+        }
+
+        // 3. Reconstruction error of R_obs on fresh observations.
+        let (recon_mse, recon_baseline_mse) = self.recon_error(&net_eval, batch, &index)?;
+        drop(net_eval);
+
+        // 4. Epochs × minibatches.
+        let total: usize = prepared.iter().map(|p| p.n / cfg.num_mini_batches).sum();
+        let lambda = self.model.config.recovery.lambda;
+        let mut acc = Acc::default();
+        for _epoch in 0..cfg.num_learning_epochs {
+            for k in 0..cfg.num_mini_batches {
+                let mut obs_t = Vec::with_capacity(self.model.robots.len());
+                obs_t.resize_with(self.model.robots.len(), || None);
+                let mut per_robot = Vec::with_capacity(prepared.len());
+                for (p, r) in prepared.iter().zip(&batch.robots) {
+                    let mb = p.n / cfg.num_mini_batches;
+                    let idx = &p.perm[k * mb..(k + 1) * mb];
+                    let g = Gathered::new(r, p, idx);
+                    obs_t[p.robot] = Some(self.tensor2(g.obs.clone(), mb, p.obs_dim));
+                    per_robot.push((mb, g));
+                }
+                let outs = self.model.net.actors(obs_t.clone());
+                let mut loss_total: Option<Tensor<1>> = None;
+                let mut mb_kl = 0f32;
+                for ((mb, g), p) in per_robot.into_iter().zip(&prepared) {
+                    let w = mb as f32 / total as f32;
+                    let out = outs[p.robot]
+                        .clone()
+                        .ok_or_else(|| LearnerError::Batch("missing actor output".into()))?;
+                    let obs = obs_t[p.robot]
+                        .clone()
+                        .ok_or_else(|| LearnerError::Batch("missing observations".into()))?;
+                    let heads = &self.model.net.robots[p.robot];
+                    let actions = self.tensor2(g.actions, mb, p.act_dim);
+                    let old_logp = self.tensor1(g.old_logp);
+                    let old_mu = self.tensor2(g.old_mu, mb, p.act_dim);
+                    let old_sigma = self.tensor2(g.old_sigma, mb, p.act_dim);
+                    let adv = self.tensor1(g.adv);
+                    let ret = self.tensor1(g.ret);
+                    let old_v = self.tensor1(g.old_v);
+
+                    // KL(old ‖ new) as rsl_rl, no gradient.
+                    let mu = out.mean.clone().detach();
+                    let sigma = out.std.clone().detach();
+                    let kl = approx_kl(mu, sigma, old_mu, old_sigma);
+                    let kl = scalar(kl)?;
+                    mb_kl += w * kl;
+
+                    let logp = gaussian_log_prob(actions, out.mean.clone(), out.std.clone());
+                    let entropy = gaussian_entropy(out.std.clone());
+                    let ratio = logp.sub(old_logp).exp();
+                    let ratio_host = tensor_to_vec(ratio.clone().detach())?;
+                    let clipped = ratio_host
+                        .iter()
+                        .filter(|r| (**r - 1.0).abs() > cfg.clip_param)
+                        .count();
+                    acc.clip_fraction += w * clipped as f32 / mb as f32;
+                    let surrogate = surrogate_loss(ratio, adv, cfg.clip_param);
+
+                    let value = heads.value(obs.clone()).squeeze_dim::<1>(1);
+                    let value_loss = value_loss(
+                        value,
+                        old_v,
+                        ret,
+                        cfg.clip_param,
+                        cfg.use_clipped_value_loss,
+                    );
+
+                    let mut loss = surrogate
+                        .clone()
+                        .add(value_loss.clone().mul_scalar(cfg.value_loss_coef))
+                        .sub(entropy.clone().mul_scalar(cfg.entropy_coef));
+                    // Recovery losses (L3P).
+                    if let (Some(r_obs), Some(h)) = (&heads.r_obs, &out.h) {
+                        let l = r_obs.loss(obs.clone(), h.clone(), &mut self.rng);
+                        acc.rec_obs += w * scalar(l.clone().detach())?;
+                        loss = loss.add(l.mul_scalar(lambda));
+                    }
+                    if let (Some(r_act), Some(z)) = (&heads.r_act, &out.z) {
+                        let z_hat = r_act.forward(out.mean.clone());
+                        let l = z_hat.sub(z.clone().detach()).square().mean();
+                        acc.rec_act += w * scalar(l.clone().detach())?;
+                        loss = loss.add(l.mul_scalar(lambda));
+                    }
+                    acc.surrogate += w * scalar(surrogate.detach())?;
+                    acc.value += w * scalar(value_loss.detach())?;
+                    acc.entropy += w * scalar(entropy.detach())?;
+                    acc.total += w * scalar(loss.clone().detach())?;
+                    let weighted = loss.mul_scalar(w);
+                    loss_total = Some(match loss_total {
+                        None => weighted,
+                        Some(t) => t.add(weighted),
+                    });
+                }
+                acc.kl += mb_kl;
+                self.lr = cfg.adapt_lr(self.lr, mb_kl);
+
+                let loss = loss_total.ok_or_else(|| LearnerError::Batch("no loss".into()))?;
+                let grads = loss.backward();
+                let mut grads = GradientsParams::from_grads(grads, &self.model.net);
+                let norm = clip_global_grad_norm(&self.model.net, &mut grads, cfg.max_grad_norm)?;
+                if !norm.is_finite() {
+                    return Err(LearnerError::NonFinite(format!(
+                        "gradient norm is {norm} at iteration {}",
+                        self.iteration
+                    )));
+                }
+                acc.grad_norm += norm;
+                acc.steps += 1;
+                let net = std::mem::replace(&mut self.model.net, placeholder_net());
+                self.model.net = self.optim.step(self.lr, net, grads);
+            }
+        }
+
+        self.iteration += 1;
+        let steps = acc.steps.max(1) as f32;
+        let mut std_sum = 0f32;
+        let mut std_n = 0usize;
+        for &i in &index {
+            let s = tensor_to_vec(self.model.net.robots[i].std().detach())?;
+            std_sum += s.iter().sum::<f32>();
+            std_n += s.len();
+        }
+        let samples = batch.samples();
+        let secs = start.elapsed().as_secs_f32();
+        let reward_sum: f32 = batch
+            .robots
+            .iter()
+            .map(|r| r.rewards.iter().sum::<f32>())
+            .sum();
+        Ok(UpdateMetrics {
+            iteration: self.iteration,
+            samples,
+            approx_kl: acc.kl / steps,
+            clip_fraction: acc.clip_fraction / steps,
+            explained_variance: explained_variance(&ev_values, &ev_returns),
+            learning_rate: self.lr,
+            entropy: acc.entropy / steps,
+            mean_std: std_sum / std_n.max(1) as f32,
+            surrogate_loss: acc.surrogate / steps,
+            value_loss: acc.value / steps,
+            rec_obs_loss: acc.rec_obs / steps,
+            rec_act_loss: acc.rec_act / steps,
+            total_loss: acc.total / steps,
+            grad_norm: acc.grad_norm / steps,
+            recon_mse,
+            recon_baseline_mse,
+            mean_reward: reward_sum / samples.max(1) as f32,
+            update_seconds: secs,
+            samples_per_second: samples as f32 / secs.max(1e-9),
+        })
+    }
+
+    /// `R_obs` sampled reconstruction MSE on up to `eval_samples` observations per robot, and the
+    /// MSE of predicting their mean.
+    fn recon_error(
+        &mut self,
+        net: &PolicyNet,
+        batch: &RolloutBatch,
+        index: &[usize],
+    ) -> Result<(f32, f32), LearnerError> {
+        let want = self.model.config.recovery.eval_samples;
+        if want == 0 || net.core.is_none() {
+            return Ok((f32::NAN, f32::NAN));
+        }
+        let (mut se, mut base, mut count) = (0f64, 0f64, 0usize);
+        for (r, &i) in batch.robots.iter().zip(index) {
+            let Some(r_obs) = &net.robots[i].r_obs else {
+                continue;
+            };
+            let n = want.min(r.samples());
+            let mut pick: Vec<usize> = (0..r.samples()).collect();
+            pick.shuffle(&mut self.rng);
+            pick.truncate(n);
+            let d = r.obs_dim;
+            let mut obs = Vec::with_capacity(n * d);
+            for &j in &pick {
+                obs.extend_from_slice(&r.observations[j * d..(j + 1) * d]);
+            }
+            let x = self.tensor2(obs.clone(), n, d).inner();
+            let h = net.robots[i].encoder.forward(x);
+            let rec = tensor_to_vec(r_obs.sample(h, &mut self.rng))?;
+            let mut mean = vec![0f64; d];
+            for row in obs.chunks_exact(d) {
+                for (m, v) in mean.iter_mut().zip(row) {
+                    *m += *v as f64 / n as f64;
+                }
+            }
+            for (k, (a, b)) in obs.iter().zip(&rec).enumerate() {
+                se += ((a - b) as f64).powi(2);
+                base += (*a as f64 - mean[k % d]).powi(2);
+            }
+            count += n * d;
+        }
+        if count == 0 {
+            return Ok((f32::NAN, f32::NAN));
+        }
+        Ok(((se / count as f64) as f32, (base / count as f64) as f32))
+    }
+}
+
+#[derive(Default)]
+struct Acc {
+    kl: f32,
+    clip_fraction: f32,
+    surrogate: f32,
+    value: f32,
+    entropy: f32,
+    rec_obs: f32,
+    rec_act: f32,
+    total: f32,
+    grad_norm: f32,
+    steps: usize,
+}
+
+/// Host copies of one robot's minibatch.
+struct Gathered {
+    obs: Vec<f32>,
+    actions: Vec<f32>,
+    old_logp: Vec<f32>,
+    old_mu: Vec<f32>,
+    old_sigma: Vec<f32>,
+    adv: Vec<f32>,
+    ret: Vec<f32>,
+    old_v: Vec<f32>,
+}
+
+impl Gathered {
+    fn new(r: &crate::storage::RobotRollout, p: &Prepared, idx: &[usize]) -> Self {
+        let (od, ad) = (p.obs_dim, p.act_dim);
+        let rows = |src: &[f32], w: usize| {
+            let mut v = Vec::with_capacity(idx.len() * w);
+            for &j in idx {
+                v.extend_from_slice(&src[j * w..(j + 1) * w]);
+            }
+            v
+        };
+        let pick = |src: &[f32]| idx.iter().map(|&j| src[j]).collect::<Vec<f32>>();
+        Self {
+            obs: rows(&r.observations, od),
+            actions: rows(&r.actions, ad),
+            old_logp: pick(&r.log_probs),
+            old_mu: rows(&r.action_means, ad),
+            old_sigma: rows(&r.action_stds, ad),
+            adv: pick(&p.adv),
+            ret: pick(&p.ret),
+            old_v: pick(&p.values),
+        }
+    }
+}
+
+/// rsl_rl's KL estimate between the behaviour policy `N(old_mu, old_sigma)` and the current
+/// `N(mu, sigma)`: `Σ_a [log(σ/σ_old + 1e-5) + (σ_old² + (μ_old − μ)²)/(2σ²) − 0.5]`, batch mean.
+///
+/// # Shapes
+/// `mu [B, A]`, `sigma [A]`, `old_mu [B, A]`, `old_sigma [B, A]` → `[1]`
+pub fn approx_kl(
+    mu: Tensor<2>,
+    sigma: Tensor<1>,
+    old_mu: Tensor<2>,
+    old_sigma: Tensor<2>,
+) -> Tensor<1> {
+    let sigma = sigma.unsqueeze_dim::<2>(0);
+    sigma
+        .clone()
+        .div(old_sigma.clone())
+        .add_scalar(1e-5)
+        .log()
+        .add(
+            old_sigma
+                .square()
+                .add(old_mu.sub(mu).square())
+                .div(sigma.square().mul_scalar(2.0)),
+        )
+        .sub_scalar(0.5)
+        .sum_dim(1)
+        .mean()
+}
+
+/// Clipped surrogate `mean(max(−A·ρ, −A·clip(ρ, 1 ± ε)))`.
+///
+/// # Shapes
+/// `ratio [B]`, `adv [B]` → `[1]`
+pub fn surrogate_loss(ratio: Tensor<1>, adv: Tensor<1>, clip: f32) -> Tensor<1> {
+    let surr = adv.clone().neg().mul(ratio.clone());
+    let surr_clipped = adv.neg().mul(ratio.clamp(1.0 - clip, 1.0 + clip));
+    surr.max_pair(surr_clipped).mean()
+}
+
+/// Value loss: clipped `mean(max((V − R)², (V_old + clip(V − V_old, ±ε) − R)²))` or plain
+/// `mean((V − R)²)`.
+///
+/// # Shapes
+/// `value [B]`, `old_value [B]`, `returns [B]` → `[1]`
+pub fn value_loss(
+    value: Tensor<1>,
+    old_value: Tensor<1>,
+    returns: Tensor<1>,
+    clip: f32,
+    clipped: bool,
+) -> Tensor<1> {
+    if clipped {
+        let v_clipped = old_value
+            .clone()
+            .add(value.clone().sub(old_value).clamp(-clip, clip));
+        let a = value.sub(returns.clone()).square();
+        let b = v_clipped.sub(returns).square();
+        a.max_pair(b).mean()
+    } else {
+        value.sub(returns).square().mean()
+    }
+}
+
+fn scalar(t: Tensor<1>) -> Result<f32, LearnerError> {
+    Ok(tensor_to_vec(t)?.first().copied().unwrap_or(f32::NAN))
+}
+
+/// A cheap stand-in while the real net is moved into the optimiser (an empty net: no core, no robots).
+fn placeholder_net() -> PolicyNet {
+    PolicyNet {
+        core: None,
+        robots: Vec::new(),
+    }
+}
+
+/// Collects the ids of every float parameter.
+struct ParamIds(Vec<(ParamId, usize)>);
+
+impl ModuleVisitor for ParamIds {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        self.0.push((param.id, D));
+    }
+}
+
+/// Scales gradients in place.
+struct GradScaler<'a> {
+    grads: &'a mut GradientsParams,
+    scale: f32,
+    sq_norm: Option<Tensor<1>>,
+}
+
+impl ModuleVisitor for GradScaler<'_> {
+    fn visit_float<const D: usize>(&mut self, param: &Param<Tensor<D>>) {
+        if self.scale >= 1.0 {
+            // First pass: accumulate Σ g².
+            if let Some(g) = self.grads.get::<D>(param.id) {
+                let s = g.square().sum();
+                self.sq_norm = Some(match self.sq_norm.take() {
+                    None => s,
+                    Some(acc) => acc.add(s),
+                });
+            }
+        } else if let Some(g) = self.grads.remove::<D>(param.id) {
+            self.grads.register::<D>(param.id, g.mul_scalar(self.scale));
+        }
+    }
+}
+
+/// `torch.nn.utils.clip_grad_norm_` over all parameters jointly: total norm `√Σ‖g‖²`; if it
+/// exceeds `max_norm`, every gradient is multiplied by `max_norm / (norm + 1e-6)`. Returns the norm
+/// before clipping.
+pub fn clip_global_grad_norm<M: Module>(
+    module: &M,
+    grads: &mut GradientsParams,
+    max_norm: f32,
+) -> Result<f32, LearnerError> {
+    let mut pass = GradScaler {
+        grads,
+        scale: 1.0,
+        sq_norm: None,
+    };
+    module.visit(&mut pass);
+    let Some(sq) = pass.sq_norm else {
+        return Ok(0.0);
+    };
+    let norm = scalar(sq)?.sqrt();
+    let coef = max_norm / (norm + 1e-6);
+    if coef < 1.0 {
+        let mut pass = GradScaler {
+            grads,
+            scale: coef,
+            sq_norm: None,
+        };
+        module.visit(&mut pass);
+    }
+    Ok(norm)
+}
+
+/// Ids of all float parameters of a module (for tests and freezing checks).
+pub fn param_ids<M: Module>(module: &M) -> Vec<ParamId> {
+    let mut v = ParamIds(Vec::new());
+    module.visit(&mut v);
+    v.0.into_iter().map(|(id, _)| id).collect()
+}

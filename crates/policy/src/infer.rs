@@ -1,0 +1,348 @@
+//! Pure-Rust inference of an exported policy (no burn): [`DeployPolicy`] loads the
+//! safetensors + JSON export written by [`crate::checkpoint`] and computes action means (and samples
+//! Gaussian actions with their log-probs) for a batch of observations. Used by the deploy controller
+//! and, where it is faster than burn, by actors.
+//!
+//! # Export format (`l3p-export-v1`)
+//! The export is one safetensors file whose header metadata holds the JSON config under the key
+//! `l3p_export` (so one blob travels on the wire), written next to an identical `policy.json` when
+//! exported to a directory. The JSON ([`ExportConfig`]):
+//!
+//! ```json
+//! { "format": "l3p-export-v1", "robot": "go1", "arch": "l3p",
+//!   "obs_dim": 48, "action_dim": 12, "action_scale": 0.25, "d_h": 64, "d_z": 16,
+//!   "layers": [ { "name": "encoder.0", "in": 48, "out": 512, "activation": "elu" },
+//!               { "name": "encoder.1", "in": 512, "out": 64, "activation": "none" },
+//!               { "name": "core.0", ... }, ..., { "name": "decoder.1", ..., "activation": "none" } ],
+//!   "std": "std", "core_sha256": "…" }
+//! ```
+//!
+//! `layers` run in order: `y = act(x · Wᵀ + b)` with tensors `<name>.weight` (F32, `[out, in]`, the
+//! PyTorch `nn.Linear` layout) and `<name>.bias` (`[out]`); `activation` is `elu` (α = 1) or `none`.
+//! The result is the action mean `a`; tensor `std` (`[action_dim]`) is the Gaussian std; the robot
+//! applies `q* = q_default + action_scale · a`. `core_sha256` (L3P) hashes the core's weights so
+//! an adapter can be checked against the core it was trained with.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use rand::Rng;
+use rand_distr::StandardNormal;
+use safetensors::SafeTensors;
+use serde::{Deserialize, Serialize};
+
+use crate::PolicyError;
+
+/// Format tag of the export.
+pub const EXPORT_FORMAT: &str = "l3p-export-v1";
+/// Metadata key of the JSON config inside the safetensors header.
+pub const EXPORT_METADATA_KEY: &str = "l3p_export";
+
+/// The JSON half of an export.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExportConfig {
+    pub format: String,
+    pub robot: String,
+    pub arch: String,
+    pub obs_dim: usize,
+    pub action_dim: usize,
+    pub action_scale: f32,
+    #[serde(default)]
+    pub d_h: Option<usize>,
+    #[serde(default)]
+    pub d_z: Option<usize>,
+    pub layers: Vec<ExportLayer>,
+    pub std: String,
+    #[serde(default)]
+    pub core_sha256: Option<String>,
+}
+
+/// One dense layer of the exported actor.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExportLayer {
+    pub name: String,
+    #[serde(rename = "in")]
+    pub input: usize,
+    #[serde(rename = "out")]
+    pub output: usize,
+    pub activation: String,
+}
+
+#[derive(Debug, Clone)]
+struct Dense {
+    /// `[in, out]` row-major (transposed from the file) for the axpy loop.
+    w: Vec<f32>,
+    b: Vec<f32>,
+    input: usize,
+    output: usize,
+    elu: bool,
+}
+
+/// A loaded export, ready for inference.
+#[derive(Debug, Clone)]
+pub struct DeployPolicy {
+    pub config: ExportConfig,
+    layers: Vec<Dense>,
+    std: Vec<f32>,
+}
+
+impl DeployPolicy {
+    /// Load from a file (`*.safetensors`, config from its metadata or from a `policy.json` beside
+    /// it) or a directory holding `policy.safetensors`.
+    pub fn load(path: &Path) -> Result<Self, PolicyError> {
+        let file = if path.is_dir() {
+            path.join("policy.safetensors")
+        } else {
+            path.to_path_buf()
+        };
+        let bytes = std::fs::read(&file).map_err(|source| PolicyError::Io {
+            path: file.display().to_string(),
+            source,
+        })?;
+        Self::from_bytes(&bytes).map_err(|e| e.in_file(&file))
+    }
+
+    /// Parse an export blob (safetensors with the JSON config in its metadata).
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, PolicyError> {
+        let bad = |m: String| PolicyError::Export(m);
+        let st = SafeTensors::deserialize(bytes)
+            .map_err(|e| bad(format!("not a safetensors file: {e}")))?;
+        let (_, meta) = SafeTensors::read_metadata(bytes)
+            .map_err(|e| bad(format!("not a safetensors file: {e}")))?;
+        let json = meta
+            .metadata()
+            .as_ref()
+            .and_then(|m| m.get(EXPORT_METADATA_KEY))
+            .ok_or_else(|| bad(format!("no `{EXPORT_METADATA_KEY}` metadata (hint: write exports with l3p's export function)")))?;
+        let config: ExportConfig =
+            serde_json::from_str(json).map_err(|e| bad(format!("bad export config: {e}")))?;
+        Self::from_parts(config, &st)
+    }
+
+    fn from_parts(config: ExportConfig, st: &SafeTensors<'_>) -> Result<Self, PolicyError> {
+        let bad = |m: String| PolicyError::Export(m);
+        if config.format != EXPORT_FORMAT {
+            return Err(bad(format!(
+                "format {} is not {EXPORT_FORMAT}",
+                config.format
+            )));
+        }
+        let read = |name: &str, shape: &[usize]| -> Result<Vec<f32>, PolicyError> {
+            let t = st
+                .tensor(name)
+                .map_err(|e| bad(format!("tensor {name}: {e}")))?;
+            if t.dtype() != safetensors::Dtype::F32 {
+                return Err(bad(format!(
+                    "tensor {name}: dtype {:?}, expected F32",
+                    t.dtype()
+                )));
+            }
+            if t.shape() != shape {
+                return Err(bad(format!(
+                    "tensor {name}: shape {:?}, expected {shape:?}",
+                    t.shape()
+                )));
+            }
+            let v: Vec<f32> = t
+                .data()
+                .chunks_exact(4)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+                .collect();
+            if v.iter().any(|x| !x.is_finite()) {
+                return Err(bad(format!("tensor {name}: non-finite values")));
+            }
+            Ok(v)
+        };
+        let mut layers = Vec::new();
+        let mut width = config.obs_dim;
+        for l in &config.layers {
+            if l.input != width {
+                return Err(bad(format!(
+                    "layer {}: input {} does not follow width {width}",
+                    l.name, l.input
+                )));
+            }
+            let w_file = read(&format!("{}.weight", l.name), &[l.output, l.input])?;
+            let b = read(&format!("{}.bias", l.name), &[l.output])?;
+            let mut w = vec![0f32; l.input * l.output];
+            for o in 0..l.output {
+                for i in 0..l.input {
+                    w[i * l.output + o] = w_file[o * l.input + i];
+                }
+            }
+            let elu = match l.activation.as_str() {
+                "elu" => true,
+                "none" => false,
+                other => return Err(bad(format!("layer {}: unknown activation {other}", l.name))),
+            };
+            layers.push(Dense {
+                w,
+                b,
+                input: l.input,
+                output: l.output,
+                elu,
+            });
+            width = l.output;
+        }
+        if width != config.action_dim || layers.is_empty() {
+            return Err(bad(format!(
+                "network ends at width {width}, expected action_dim {}",
+                config.action_dim
+            )));
+        }
+        let std = read(&config.std, &[config.action_dim])?;
+        Ok(Self {
+            config,
+            layers,
+            std,
+        })
+    }
+
+    pub fn obs_dim(&self) -> usize {
+        self.config.obs_dim
+    }
+
+    pub fn action_dim(&self) -> usize {
+        self.config.action_dim
+    }
+
+    /// Gaussian std per action dimension.
+    pub fn std(&self) -> &[f32] {
+        &self.std
+    }
+
+    /// Action means for `n = obs.len() / obs_dim` observations (row-major), written into `out`
+    /// (`[n, action_dim]`, resized). Allocation-free after the first call with the same `n` when
+    /// the same `scratch` is reused.
+    pub fn act_into(
+        &self,
+        obs: &[f32],
+        out: &mut Vec<f32>,
+        scratch: &mut InferScratch,
+    ) -> Result<(), PolicyError> {
+        let d = self.config.obs_dim;
+        if !obs.len().is_multiple_of(d) {
+            return Err(PolicyError::Shape(format!(
+                "observation buffer of {} floats is not a multiple of obs_dim {d}",
+                obs.len()
+            )));
+        }
+        let n = obs.len() / d;
+        scratch.a.clear();
+        scratch.a.extend_from_slice(obs);
+        for layer in &self.layers {
+            dense_forward(layer, &scratch.a, n, &mut scratch.b);
+            std::mem::swap(&mut scratch.a, &mut scratch.b);
+        }
+        out.clear();
+        out.extend_from_slice(&scratch.a);
+        Ok(())
+    }
+
+    /// Action means (allocating convenience form of [`act_into`](Self::act_into)).
+    pub fn act(&self, obs: &[f32]) -> Result<Vec<f32>, PolicyError> {
+        let mut out = Vec::new();
+        self.act_into(obs, &mut out, &mut InferScratch::default())?;
+        Ok(out)
+    }
+
+    /// Sample actions `a ~ N(mean, std)`; returns `(actions, log_probs)` with `log_probs` summed over
+    /// action dimensions, given the means from [`act`](Self::act).
+    pub fn sample<R: Rng>(&self, means: &[f32], rng: &mut R) -> (Vec<f32>, Vec<f32>) {
+        let a = self.config.action_dim;
+        let n = means.len() / a;
+        let mut actions = vec![0f32; means.len()];
+        let mut logp = vec![0f32; n];
+        let log_norm: f32 = self.std.iter().map(|s| s.ln()).sum::<f32>()
+            + 0.5 * a as f32 * (2.0 * std::f32::consts::PI).ln();
+        for i in 0..n {
+            let mut acc = 0f32;
+            for j in 0..a {
+                let e: f32 = rng.sample(StandardNormal);
+                actions[i * a + j] = means[i * a + j] + self.std[j] * e;
+                acc += 0.5 * e * e;
+            }
+            logp[i] = -acc - log_norm;
+        }
+        (actions, logp)
+    }
+}
+
+/// Reusable buffers of [`DeployPolicy::act_into`].
+#[derive(Debug, Default, Clone)]
+pub struct InferScratch {
+    a: Vec<f32>,
+    b: Vec<f32>,
+}
+
+fn dense_forward(l: &Dense, x: &[f32], n: usize, y: &mut Vec<f32>) {
+    let (din, dout) = (l.input, l.output);
+    y.clear();
+    y.resize(n * dout, 0.0);
+    // Four rows at a time: every weight row loaded once feeds four accumulating rows.
+    let mut r = 0;
+    while r + 4 <= n {
+        let (y0, rest) = y[r * dout..(r + 4) * dout].split_at_mut(dout);
+        let (y1, rest) = rest.split_at_mut(dout);
+        let (y2, y3) = rest.split_at_mut(dout);
+        for yy in [&mut *y0, &mut *y1, &mut *y2, &mut *y3] {
+            yy.copy_from_slice(&l.b);
+        }
+        for i in 0..din {
+            let w = &l.w[i * dout..(i + 1) * dout];
+            let (x0, x1, x2, x3) = (
+                x[r * din + i],
+                x[(r + 1) * din + i],
+                x[(r + 2) * din + i],
+                x[(r + 3) * din + i],
+            );
+            for j in 0..dout {
+                let wj = w[j];
+                y0[j] += x0 * wj;
+                y1[j] += x1 * wj;
+                y2[j] += x2 * wj;
+                y3[j] += x3 * wj;
+            }
+        }
+        r += 4;
+    }
+    while r < n {
+        let yr = &mut y[r * dout..(r + 1) * dout];
+        yr.copy_from_slice(&l.b);
+        for i in 0..din {
+            let xi = x[r * din + i];
+            let w = &l.w[i * dout..(i + 1) * dout];
+            for j in 0..dout {
+                yr[j] += xi * w[j];
+            }
+        }
+        r += 1;
+    }
+    if l.elu {
+        for v in y.iter_mut() {
+            if *v < 0.0 {
+                *v = v.exp_m1();
+            }
+        }
+    }
+}
+
+/// Load the JSON config of a directory export (`policy.json`).
+pub fn read_export_json(dir: &Path) -> Result<ExportConfig, PolicyError> {
+    let path = dir.join("policy.json");
+    let text = std::fs::read_to_string(&path).map_err(|source| PolicyError::Io {
+        path: path.display().to_string(),
+        source,
+    })?;
+    serde_json::from_str(&text).map_err(|e| PolicyError::Export(format!("{}: {e}", path.display())))
+}
+
+/// Metadata map holding the config, for writing.
+pub(crate) fn export_metadata(
+    config: &ExportConfig,
+) -> Result<HashMap<String, String>, PolicyError> {
+    let json = serde_json::to_string(config).map_err(|e| PolicyError::Export(e.to_string()))?;
+    Ok(HashMap::from([(EXPORT_METADATA_KEY.to_string(), json)]))
+}

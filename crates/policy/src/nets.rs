@@ -1,0 +1,116 @@
+//! Building blocks: [`Mlp`] (fully connected, ELU between layers, linear output) with its
+//! [`MlpConfig`], and [`elu`], written without masks because burn's `activation::elu` (built on
+//! `mask_where`) is several times slower on the `flex` CPU backend (`reference/burn-cpu-notes.md`).
+
+use burn::module::Module;
+use burn::nn::{Linear, LinearConfig};
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Tensor};
+
+/// ELU with α = 1: `relu(x) + exp(-relu(-x)) - 1` — the same values and gradients as
+/// `x > 0 ? x : exp(x) - 1`, with only elementwise ops.
+///
+/// # Shapes
+/// any `[..]` → same shape
+pub fn elu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
+    let pos = relu(x.clone());
+    let neg = relu(x.neg()).neg().exp();
+    pos.add(neg).sub_scalar(1.0)
+}
+
+/// Sizes of an [`Mlp`]: `input → hidden… → output`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MlpConfig {
+    pub input: usize,
+    pub hidden: Vec<usize>,
+    pub output: usize,
+}
+
+impl MlpConfig {
+    pub fn new(input: usize, hidden: &[usize], output: usize) -> Self {
+        Self {
+            input,
+            hidden: hidden.to_vec(),
+            output,
+        }
+    }
+
+    /// Layer widths including input and output.
+    pub fn sizes(&self) -> Vec<usize> {
+        let mut s = vec![self.input];
+        s.extend_from_slice(&self.hidden);
+        s.push(self.output);
+        s
+    }
+
+    /// Initialise with PyTorch's default `nn.Linear` init (Kaiming uniform, gain 1/√3), as rsl_rl.
+    pub fn init(&self, device: &Device) -> Mlp {
+        let sizes = self.sizes();
+        let layers = sizes
+            .windows(2)
+            .map(|w| LinearConfig::new(w[0], w[1]).init(device))
+            .collect();
+        Mlp { layers }
+    }
+}
+
+/// Fully connected network, ELU after every layer but the last.
+#[derive(Module, Debug)]
+pub struct Mlp {
+    pub layers: Vec<Linear>,
+}
+
+impl Mlp {
+    /// # Shapes
+    /// `[batch, input]` → `[batch, output]`
+    pub fn forward(&self, x: Tensor<2>) -> Tensor<2> {
+        let last = self.layers.len().saturating_sub(1);
+        let mut x = x;
+        for (i, layer) in self.layers.iter().enumerate() {
+            x = layer.forward(x);
+            if i < last {
+                x = elu(x);
+            }
+        }
+        x
+    }
+
+    pub fn input_dim(&self) -> usize {
+        self.layers
+            .first()
+            .map(|l| l.weight.shape().dims::<2>()[0])
+            .unwrap_or(0)
+    }
+
+    pub fn output_dim(&self) -> usize {
+        self.layers
+            .last()
+            .map(|l| l.weight.shape().dims::<2>()[1])
+            .unwrap_or(0)
+    }
+
+    /// Weights `[in, out]` and biases `[out]` of every layer, copied to host memory.
+    pub fn to_host(&self) -> Vec<(Vec<f32>, Vec<f32>, usize, usize)> {
+        self.layers
+            .iter()
+            .map(|l| {
+                let [i, o] = l.weight.shape().dims::<2>();
+                let w = l
+                    .weight
+                    .val()
+                    .into_data()
+                    .try_into_vec::<f32>()
+                    .unwrap_or_default();
+                let b = match &l.bias {
+                    Some(b) => b
+                        .val()
+                        .into_data()
+                        .try_into_vec::<f32>()
+                        .unwrap_or_default(),
+                    None => vec![0.0; o],
+                };
+                (w, b, i, o)
+            })
+            .collect()
+    }
+}
