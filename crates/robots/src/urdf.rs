@@ -1,0 +1,585 @@
+//! Tolerant URDF loading: [`load_urdf_file`] / [`load_urdf_str`] turn any vendor URDF into a
+//! [`RobotModel`], reporting problems as [`UrdfError`] (file, element, line).
+//!
+//! Pipeline:
+//! 1. A pre-pass over the XML text (xml-rs) checks the numeric attributes of the elements the model
+//!    uses, with line numbers, and rewrites the document without what makes `urdf-rs` 0.10 fail or
+//!    what it does not need: the second and later `<material>` of a `<visual>` (the current Go2 file
+//!    has several, which urdf-rs rejects with `duplicate field material`), `<gazebo>` and
+//!    `<transmission>` blocks, comments.
+//! 2. `urdf-rs` parses the cleaned text.
+//! 3. Links are merged across fixed joints into rigid bodies (masses, centres of mass and inertia
+//!    tensors combined with the parallel-axis rule, colliders re-expressed in the body frame).
+//!    Mesh colliders (`package://` or missing files: this crate reads no meshes) get a box stand-in
+//!    sized from the link's inertia; links without inertia or with zero mass contribute nothing, and
+//!    a moving body left with no mass gets a small placeholder mass (recorded in `warnings`).
+//!    Continuous joints have no limits. Floating, planar and spherical joints are rejected.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+use rapier3d::math::{Mat3, Pose, Rot3, Vec3};
+use xml::common::Position;
+use xml::reader::{EventReader, ParserConfig, XmlEvent};
+use xml::writer::EmitterConfig;
+
+use crate::model::{
+    BodySpec, ColliderSpec, JointKind, JointSpec, RobotModel, ShapeSpec, parallel_axis,
+};
+
+/// Mass given to a moving body that has no mass in the file (kg).
+pub const PLACEHOLDER_MASS: f32 = 0.01;
+
+/// Errors from URDF loading.
+#[derive(Debug, thiserror::Error)]
+pub enum UrdfError {
+    /// The file could not be read.
+    #[error("cannot read urdf file {file}: {source}")]
+    Io {
+        /// Path.
+        file: String,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// The text is not well-formed XML.
+    #[error("{file}:{line}: malformed xml: {message}")]
+    Xml {
+        /// Path or name.
+        file: String,
+        /// 1-based line.
+        line: u64,
+        /// Parser message.
+        message: String,
+    },
+    /// An element has a missing or malformed attribute.
+    #[error("{file}:{line}: <{element}>: {message}")]
+    Invalid {
+        /// Path or name.
+        file: String,
+        /// Element name.
+        element: String,
+        /// 1-based line.
+        line: u64,
+        /// What is wrong.
+        message: String,
+    },
+    /// urdf-rs rejected the (cleaned) document.
+    #[error("{file}: urdf-rs rejected the file: {message}")]
+    Parse {
+        /// Path or name.
+        file: String,
+        /// urdf-rs message.
+        message: String,
+    },
+    /// The kinematic tree is unusable (no root, several roots, unknown links, unsupported joints).
+    #[error("{file}: {message}")]
+    Structure {
+        /// Path or name.
+        file: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+/// Loads a URDF file from disk.
+pub fn load_urdf_file(path: impl AsRef<Path>) -> Result<RobotModel, UrdfError> {
+    let path = path.as_ref();
+    let file = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| UrdfError::Io {
+        file: file.clone(),
+        source,
+    })?;
+    load_urdf_str(&text, &file)
+}
+
+/// Loads a URDF document from text; `file` names it in errors.
+pub fn load_urdf_str(text: &str, file: &str) -> Result<RobotModel, UrdfError> {
+    let cleaned = prepass(text, file)?;
+    let robot = urdf_rs::read_from_string(&cleaned).map_err(|e| UrdfError::Parse {
+        file: file.to_string(),
+        message: e.to_string(),
+    })?;
+    build(&robot, file)
+}
+
+const SKIPPED_TOP_LEVEL: [&str; 2] = ["gazebo", "transmission"];
+
+/// Validates attributes (with line numbers) and rewrites the document without the parts urdf-rs
+/// trips on. Returns the cleaned XML text.
+fn prepass(text: &str, file: &str) -> Result<String, UrdfError> {
+    let config = ParserConfig::new()
+        .ignore_comments(true)
+        .trim_whitespace(true);
+    let mut reader = EventReader::new_with_config(text.as_bytes(), config);
+    let mut out = Vec::with_capacity(text.len());
+    let mut writer = EmitterConfig::new()
+        .perform_indent(false)
+        .write_document_declaration(false)
+        .create_writer(&mut out);
+    // Stack of open elements: (name, number of <material> children seen so far).
+    let mut stack: Vec<(String, usize)> = Vec::new();
+    let mut skip_depth = 0usize;
+    loop {
+        let ev = reader.next().map_err(|e| UrdfError::Xml {
+            file: file.to_string(),
+            line: e.position().row + 1,
+            message: e.msg().to_string(),
+        })?;
+        let line = reader.position().row + 1;
+        match &ev {
+            XmlEvent::EndDocument => break,
+            XmlEvent::StartElement {
+                name, attributes, ..
+            } => {
+                let local = name.local_name.clone();
+                if skip_depth > 0 {
+                    skip_depth += 1;
+                    continue;
+                }
+                let parent = stack.last().map(|(n, _)| n.clone()).unwrap_or_default();
+                let parent = parent.as_str();
+                let mut skip = stack.len() == 1 && SKIPPED_TOP_LEVEL.contains(&local.as_str());
+                if local == "material"
+                    && parent == "visual"
+                    && let Some(top) = stack.last_mut()
+                {
+                    top.1 += 1;
+                    skip |= top.1 > 1;
+                }
+                if skip {
+                    skip_depth = 1;
+                    continue;
+                }
+                let attr = |k: &str| {
+                    attributes
+                        .iter()
+                        .find(|a| a.name.local_name == k)
+                        .map(|a| a.value.as_str())
+                };
+                validate(&local, parent, &attr, file, line)?;
+                stack.push((local, 0));
+            }
+            XmlEvent::EndElement { .. } => {
+                if skip_depth > 0 {
+                    skip_depth -= 1;
+                    continue;
+                }
+                stack.pop();
+            }
+            _ => {
+                if skip_depth > 0 {
+                    continue;
+                }
+            }
+        }
+        if let Some(w) = ev.as_writer_event() {
+            writer.write(w).map_err(|e| UrdfError::Xml {
+                file: file.to_string(),
+                line,
+                message: e.to_string(),
+            })?;
+        }
+    }
+    drop(writer);
+    String::from_utf8(out).map_err(|e| UrdfError::Xml {
+        file: file.to_string(),
+        line: 0,
+        message: e.to_string(),
+    })
+}
+
+fn parse_floats(s: &str) -> Option<Vec<f64>> {
+    s.split_whitespace()
+        .map(|t| t.parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect()
+}
+
+fn validate<'a>(
+    element: &str,
+    parent: &str,
+    attr: &dyn Fn(&str) -> Option<&'a str>,
+    file: &str,
+    line: u64,
+) -> Result<(), UrdfError> {
+    let err = |message: String| UrdfError::Invalid {
+        file: file.to_string(),
+        element: element.to_string(),
+        line,
+        message,
+    };
+    let vec3 = |k: &str, required: bool| -> Result<Option<Vec<f64>>, UrdfError> {
+        match attr(k) {
+            None if required => Err(err(format!("missing attribute `{k}`"))),
+            None => Ok(None),
+            Some(v) => match parse_floats(v) {
+                Some(f) if f.len() == 3 => Ok(Some(f)),
+                _ => Err(err(format!("attribute `{k}`=\"{v}\" is not three numbers"))),
+            },
+        }
+    };
+    let num = |k: &str, required: bool| -> Result<Option<f64>, UrdfError> {
+        match attr(k) {
+            None if required => Err(err(format!("missing attribute `{k}`"))),
+            None => Ok(None),
+            Some(v) => match v.trim().parse::<f64>() {
+                Ok(f) if f.is_finite() => Ok(Some(f)),
+                _ => Err(err(format!("attribute `{k}`=\"{v}\" is not a number"))),
+            },
+        }
+    };
+    match element {
+        "link" if attr("name").is_none() => {
+            return Err(err("missing attribute `name`".into()));
+        }
+        "joint" if parent == "robot" => {
+            if attr("name").is_none() {
+                return Err(err("missing attribute `name`".into()));
+            }
+            match attr("type") {
+                Some(
+                    "revolute" | "continuous" | "prismatic" | "fixed" | "floating" | "planar"
+                    | "spherical",
+                ) => {}
+                Some(t) => return Err(err(format!("unknown joint type `{t}`"))),
+                None => return Err(err("missing attribute `type`".into())),
+            }
+        }
+        "parent" | "child" if parent == "joint" && attr("link").is_none() => {
+            return Err(err("missing attribute `link`".into()));
+        }
+        "origin" => {
+            vec3("xyz", false)?;
+            vec3("rpy", false)?;
+        }
+        "axis" => {
+            vec3("xyz", true)?;
+        }
+        "mass" => {
+            if let Some(m) = num("value", true)?
+                && m < 0.0
+            {
+                return Err(err(format!("negative mass {m}")));
+            }
+        }
+        "inertia" => {
+            for k in ["ixx", "ixy", "ixz", "iyy", "iyz", "izz"] {
+                num(k, false)?;
+            }
+        }
+        "limit" if parent == "joint" => {
+            for k in ["lower", "upper", "effort", "velocity"] {
+                num(k, false)?;
+            }
+        }
+        "box" => {
+            vec3("size", true)?;
+        }
+        "sphere" => {
+            num("radius", true)?;
+        }
+        "cylinder" | "capsule" => {
+            num("radius", true)?;
+            num("length", true)?;
+        }
+        "mesh" => {
+            if attr("filename").is_none() {
+                return Err(err("missing attribute `filename`".into()));
+            }
+            vec3("scale", false)?;
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
+fn v3(v: &urdf_rs::Vec3) -> Vec3 {
+    Vec3::new(v[0] as f32, v[1] as f32, v[2] as f32)
+}
+
+fn pose_of(p: &urdf_rs::Pose) -> Pose {
+    let rot = Rot3::from_rotation_z(p.rpy[2] as f32)
+        * Rot3::from_rotation_y(p.rpy[1] as f32)
+        * Rot3::from_rotation_x(p.rpy[0] as f32);
+    Pose::from_parts(v3(&p.xyz), rot)
+}
+
+/// Accumulates mass properties about the body origin.
+#[derive(Clone, Copy)]
+struct MassAcc {
+    mass: f32,
+    first_moment: Vec3,
+    inertia_origin: Mat3,
+}
+
+impl Default for MassAcc {
+    // Not derived: glam's `Mat3::default()` is the identity.
+    fn default() -> Self {
+        Self {
+            mass: 0.0,
+            first_moment: Vec3::ZERO,
+            inertia_origin: Mat3::ZERO,
+        }
+    }
+}
+
+struct Builder<'a> {
+    file: &'a str,
+    robot: &'a urdf_rs::Robot,
+    links: HashMap<&'a str, usize>,
+    children: HashMap<&'a str, Vec<usize>>,
+    bodies: Vec<BodySpec>,
+    acc: Vec<MassAcc>,
+    warnings: Vec<String>,
+}
+
+fn build(robot: &urdf_rs::Robot, file: &str) -> Result<RobotModel, UrdfError> {
+    let structure = |message: String| UrdfError::Structure {
+        file: file.to_string(),
+        message,
+    };
+    if robot.links.is_empty() {
+        return Err(structure("the file has no <link>".into()));
+    }
+    let mut links = HashMap::new();
+    for (i, l) in robot.links.iter().enumerate() {
+        if links.insert(l.name.as_str(), i).is_some() {
+            return Err(structure(format!("link `{}` is defined twice", l.name)));
+        }
+    }
+    let mut children: HashMap<&str, Vec<usize>> = HashMap::new();
+    let mut is_child = vec![false; robot.links.len()];
+    for (ji, j) in robot.joints.iter().enumerate() {
+        let Some(&ci) = links.get(j.child.link.as_str()) else {
+            return Err(structure(format!(
+                "joint `{}` names unknown child link `{}`",
+                j.name, j.child.link
+            )));
+        };
+        if !links.contains_key(j.parent.link.as_str()) {
+            return Err(structure(format!(
+                "joint `{}` names unknown parent link `{}`",
+                j.name, j.parent.link
+            )));
+        }
+        if is_child[ci] {
+            return Err(structure(format!(
+                "link `{}` is the child of two joints",
+                j.child.link
+            )));
+        }
+        is_child[ci] = true;
+        children.entry(j.parent.link.as_str()).or_default().push(ji);
+    }
+    let roots: Vec<usize> = (0..robot.links.len()).filter(|&i| !is_child[i]).collect();
+    let root = match roots.as_slice() {
+        [r] => *r,
+        [] => return Err(structure("no root link (the joints form a cycle)".into())),
+        many => {
+            let names: Vec<&str> = many.iter().map(|&i| robot.links[i].name.as_str()).collect();
+            return Err(structure(format!(
+                "several root links: {}",
+                names.join(", ")
+            )));
+        }
+    };
+    let mut b = Builder {
+        file,
+        robot,
+        links,
+        children,
+        bodies: Vec::new(),
+        acc: Vec::new(),
+        warnings: Vec::new(),
+    };
+    b.new_body(&robot.links[root].name, None, None);
+    b.visit(root, 0, Pose::IDENTITY, 0)?;
+    b.finish();
+    Ok(RobotModel {
+        name: robot.name.clone(),
+        source: file.to_string(),
+        bodies: b.bodies,
+        warnings: b.warnings,
+    })
+}
+
+impl<'a> Builder<'a> {
+    fn new_body(&mut self, name: &str, parent: Option<usize>, joint: Option<JointSpec>) -> usize {
+        self.bodies.push(BodySpec {
+            name: name.to_string(),
+            parent,
+            joint,
+            mass: 0.0,
+            com: Vec3::ZERO,
+            inertia: Mat3::ZERO,
+            colliders: Vec::new(),
+            links: Vec::new(),
+        });
+        self.acc.push(MassAcc::default());
+        self.bodies.len() - 1
+    }
+
+    fn visit(&mut self, li: usize, body: usize, t: Pose, depth: usize) -> Result<(), UrdfError> {
+        if depth > 1000 {
+            return Err(UrdfError::Structure {
+                file: self.file.to_string(),
+                message: "kinematic tree deeper than 1000".into(),
+            });
+        }
+        let robot = self.robot;
+        let link = &robot.links[li];
+        self.bodies[body].links.push((link.name.clone(), t));
+        // Mass.
+        let m = link.inertial.mass.value as f32;
+        let (mut lm, mut lcom, mut lrot, mut lin) = (0.0, Vec3::ZERO, Rot3::IDENTITY, Mat3::ZERO);
+        if m > 0.0 {
+            let ip = pose_of(&link.inertial.origin);
+            let i = &link.inertial.inertia;
+            let it = Mat3::from_cols(
+                Vec3::new(i.ixx as f32, i.ixy as f32, i.ixz as f32),
+                Vec3::new(i.ixy as f32, i.iyy as f32, i.iyz as f32),
+                Vec3::new(i.ixz as f32, i.iyz as f32, i.izz as f32),
+            );
+            let rot = Mat3::from_quat(t.rotation * ip.rotation);
+            let c = t * ip.translation;
+            let i_world = rot * it * rot.transpose();
+            let acc = &mut self.acc[body];
+            acc.mass += m;
+            acc.first_moment += c * m;
+            acc.inertia_origin += i_world + parallel_axis(m, c);
+            (lm, lcom, lrot, lin) = (m, ip.translation, ip.rotation, it);
+        }
+        // Colliders.
+        for col in &link.collision {
+            let pose = t * pose_of(&col.origin);
+            let shape = match &col.geometry {
+                urdf_rs::Geometry::Box { size } => Some(ShapeSpec::Cuboid {
+                    half: v3(size) * 0.5,
+                }),
+                urdf_rs::Geometry::Sphere { radius } => Some(ShapeSpec::Sphere {
+                    radius: *radius as f32,
+                }),
+                urdf_rs::Geometry::Cylinder { radius, length } => Some(ShapeSpec::Cylinder {
+                    half_length: *length as f32 * 0.5,
+                    radius: *radius as f32,
+                }),
+                urdf_rs::Geometry::Capsule { radius, length } => Some(ShapeSpec::Capsule {
+                    half_length: *length as f32 * 0.5,
+                    radius: *radius as f32,
+                }),
+                urdf_rs::Geometry::Mesh { filename, .. } => {
+                    // No mesh is read: a box with the link's inertia stands in for it.
+                    if lm > 0.0 {
+                        let d = Vec3::new(lin.x_axis.x, lin.y_axis.y, lin.z_axis.z);
+                        let side = |a: f32, b: f32, c: f32| {
+                            ((6.0 * (b + c - a) / lm).max(0.0).sqrt()).max(0.02)
+                        };
+                        let half = Vec3::new(
+                            side(d.x, d.y, d.z),
+                            side(d.y, d.x, d.z),
+                            side(d.z, d.x, d.y),
+                        ) * 0.5;
+                        self.warnings.push(format!("link `{}`: mesh `{filename}` replaced by a {:.3}x{:.3}x{:.3} m box from its inertia", link.name, half.x * 2.0, half.y * 2.0, half.z * 2.0));
+                        let p = t * Pose::from_parts(lcom, lrot);
+                        self.bodies[body].colliders.push(ColliderSpec {
+                            shape: ShapeSpec::Cuboid { half },
+                            pose: p,
+                            link: link.name.clone(),
+                            stand_in: true,
+                        });
+                    } else {
+                        self.warnings.push(format!(
+                            "link `{}`: mesh `{filename}` ignored (no inertia to size a stand-in)",
+                            link.name
+                        ));
+                    }
+                    None
+                }
+            };
+            if let Some(shape) = shape {
+                self.bodies[body].colliders.push(ColliderSpec {
+                    shape,
+                    pose,
+                    link: link.name.clone(),
+                    stand_in: false,
+                });
+            }
+        }
+        // Children.
+        let kids = self
+            .children
+            .get(link.name.as_str())
+            .cloned()
+            .unwrap_or_default();
+        for ji in kids {
+            let j = &robot.joints[ji];
+            let origin = t * pose_of(&j.origin);
+            let ci = self.links[j.child.link.as_str()];
+            let kind = match &j.joint_type {
+                urdf_rs::JointType::Fixed => {
+                    self.visit(ci, body, origin, depth + 1)?;
+                    continue;
+                }
+                urdf_rs::JointType::Revolute | urdf_rs::JointType::Continuous => {
+                    JointKind::Revolute
+                }
+                urdf_rs::JointType::Prismatic => JointKind::Prismatic,
+                other => {
+                    return Err(UrdfError::Structure {
+                        file: self.file.to_string(),
+                        message: format!(
+                            "joint `{}` has unsupported type {other:?}\nhint: only revolute, continuous, prismatic and fixed joints below a floating base are supported",
+                            j.name
+                        ),
+                    });
+                }
+            };
+            let axis = v3(&j.axis.xyz);
+            if axis.length() < 1e-6 {
+                return Err(UrdfError::Structure {
+                    file: self.file.to_string(),
+                    message: format!("joint `{}` has a zero axis", j.name),
+                });
+            }
+            let lim = &j.limit;
+            let limits = match j.joint_type {
+                urdf_rs::JointType::Continuous => None,
+                _ if lim.upper > lim.lower && lim.lower.is_finite() && lim.upper.is_finite() => {
+                    Some((lim.lower as f32, lim.upper as f32))
+                }
+                _ => None,
+            };
+            let pos = |v: f64| (v.is_finite() && v > 0.0).then_some(v as f32);
+            let spec = JointSpec {
+                name: j.name.clone(),
+                kind,
+                origin,
+                axis: axis.normalize(),
+                limits,
+                effort: pos(lim.effort),
+                velocity: pos(lim.velocity),
+            };
+            let nb = self.new_body(&j.child.link, Some(body), Some(spec));
+            self.visit(ci, nb, Pose::IDENTITY, depth + 1)?;
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self) {
+        for (b, acc) in self.bodies.iter_mut().zip(&self.acc) {
+            if acc.mass > 0.0 {
+                let com = acc.first_moment / acc.mass;
+                b.mass = acc.mass;
+                b.com = com;
+                b.inertia = acc.inertia_origin - parallel_axis(acc.mass, com);
+            } else {
+                self.warnings.push(format!(
+                    "body `{}` has no mass in the file; using {PLACEHOLDER_MASS} kg",
+                    b.name
+                ));
+                b.mass = PLACEHOLDER_MASS;
+                b.com = Vec3::ZERO;
+                b.inertia = Mat3::IDENTITY * 1e-6;
+            }
+        }
+    }
+}
