@@ -12,6 +12,16 @@ use serde::{Deserialize, Serialize};
 pub struct Config {
     pub run: RunConfig,
     pub zenoh: l3p_registry::net::ZenohSettings,
+    /// Simulation and locomotion task (terrain, commands, rewards, noise, randomisation).
+    pub env: l3p_robots::config::EnvConfig,
+    /// Networks: architecture (`mlp` | `l3p`), latent sizes, hidden sizes, recovery modules.
+    pub model: l3p_policy::PolicyConfig,
+    /// PPO hyperparameters and training mode.
+    pub ppo: l3p_learner::PpoConfig,
+    /// How the learner daemon gathers data, checkpoints and stops.
+    pub learner: l3p_learner::daemon::DaemonConfig,
+    /// What each actor collects per policy version.
+    pub rollout: RolloutConfig,
     /// Rollout actors started by `l3p train` (local mode); daemon-mode actors name their robot on the
     /// command line instead.
     pub actors: Vec<ActorSpec>,
@@ -39,7 +49,25 @@ pub struct RunConfig {
 
 impl Default for RunConfig {
     fn default() -> Self {
-        Self { name: "default".into(), data_dir: PathBuf::from("l3p-data"), seed: 1 }
+        Self {
+            name: "default".into(),
+            data_dir: PathBuf::from("l3p-data"),
+            seed: 1,
+        }
+    }
+}
+
+/// Rollout collection shared by every actor of a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RolloutConfig {
+    /// Control steps per environment per policy version (rsl_rl's `num_steps_per_env`).
+    pub steps_per_env: usize,
+}
+
+impl Default for RolloutConfig {
+    fn default() -> Self {
+        Self { steps_per_env: 24 }
     }
 }
 

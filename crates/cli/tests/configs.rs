@@ -47,6 +47,11 @@ fn misspelt_key_names_key_and_file() {
 
 #[test]
 fn missing_file_is_a_clear_error() {
-    let err = Config::load(Path::new("/nonexistent/l3p.toml")).unwrap_err().to_string();
-    assert!(err.contains("cannot read config /nonexistent/l3p.toml"), "{err}");
+    let err = Config::load(Path::new("/nonexistent/l3p.toml"))
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("cannot read config /nonexistent/l3p.toml"),
+        "{err}"
+    );
 }

@@ -1,0 +1,364 @@
+//! The rollout actor: one robot morphology, `N` simulated environments, local policy inference, and
+//! the Zenoh side of collecting experience for the learner.
+//!
+//! Main types: [`RolloutEnv`] (what the actor needs from a vectorised environment; implemented for
+//! `l3p_robots::VecEnv`), [`Collector`] (fills a [`RolloutChunk`] with `steps` control steps under one
+//! policy version), [`ActorOptions`] and [`run`] (the daemon loop).
+//!
+//! Daemon loop: declare a liveliness token `l3p/<run>/actors/<robot>/<actor>`; wait for a policy
+//! announce newer than the last version collected; fetch that version's weights by query and check
+//! their sha256 against the announce; collect a chunk on a blocking thread; publish it with
+//! `CongestionControl::Block` (Zenoh's default `Drop` silently loses large messages); publish episode
+//! metrics; repeat. A restarted actor simply joins at the version currently announced.
+
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use l3p_policy::{DeployPolicy, InferScratch};
+use l3p_proto::{
+    EpisodeStats, MetricsRecord, PolicyAnnounce, RolloutChunk, WeightsBlob, codec, keys,
+};
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+use sha2::{Digest, Sha256};
+use tokio_util::sync::CancellationToken;
+use tracing::{info, warn};
+use zenoh::Session;
+use zenoh::qos::CongestionControl;
+
+/// What the actor needs from a vectorised environment.
+pub trait RolloutEnv: Send + 'static {
+    fn num_envs(&self) -> usize;
+    fn obs_dim(&self) -> usize;
+    fn action_dim(&self) -> usize;
+    /// Current observations `[num_envs, obs_dim]` (after the last step's resets).
+    fn observations(&self) -> &[f32];
+    /// Advance every env by one control step with `actions [num_envs, action_dim]`; write per-env
+    /// rewards and end flags and append the episodes that finished.
+    fn step(
+        &mut self,
+        actions: &[f32],
+        rewards: &mut [f32],
+        terminated: &mut [bool],
+        truncated: &mut [bool],
+        episodes: &mut Vec<EpisodeStats>,
+    );
+}
+
+/// Fills rollout chunks from an environment with a policy; buffers are reused between chunks.
+pub struct Collector<E: RolloutEnv> {
+    pub env: E,
+    rng: StdRng,
+    scratch: InferScratch,
+    means: Vec<f32>,
+}
+
+impl<E: RolloutEnv> Collector<E> {
+    pub fn new(env: E, seed: u64) -> Self {
+        Self {
+            env,
+            rng: StdRng::seed_from_u64(seed),
+            scratch: InferScratch::default(),
+            means: Vec::new(),
+        }
+    }
+
+    /// Run `chunk.steps` control steps, sampling actions from `policy`, writing into `chunk` (whose
+    /// shape must match the environment). Returns an error if the policy's dimensions do not match.
+    pub fn collect(
+        &mut self,
+        policy: &DeployPolicy,
+        chunk: &mut RolloutChunk,
+    ) -> Result<(), ActorError> {
+        let (n, od, ad) = (
+            self.env.num_envs(),
+            self.env.obs_dim(),
+            self.env.action_dim(),
+        );
+        if policy.obs_dim() != od || policy.action_dim() != ad {
+            return Err(ActorError::Dims(format!(
+                "policy has obs {} / action {}, environment has obs {od} / action {ad}",
+                policy.obs_dim(),
+                policy.action_dim()
+            )));
+        }
+        let start = Instant::now();
+        chunk.episodes.clear();
+        let std = policy.std().to_vec();
+        for t in 0..chunk.steps as usize {
+            let obs_rows = t * n * od..(t + 1) * n * od;
+            chunk.observations[obs_rows].copy_from_slice(self.env.observations());
+            policy
+                .act_into(self.env.observations(), &mut self.means, &mut self.scratch)
+                .map_err(|e| ActorError::Policy(e.to_string()))?;
+            let (actions, log_probs) = policy.sample(&self.means, &mut self.rng);
+            let act_rows = t * n * ad..(t + 1) * n * ad;
+            chunk.actions[act_rows.clone()].copy_from_slice(&actions);
+            chunk.action_means[act_rows.clone()].copy_from_slice(&self.means);
+            for row in chunk.action_stds[act_rows].chunks_exact_mut(ad) {
+                row.copy_from_slice(&std);
+            }
+            let rows = t * n..(t + 1) * n;
+            chunk.log_probs[rows.clone()].copy_from_slice(&log_probs);
+            self.env.step(
+                &actions,
+                &mut chunk.rewards[rows.clone()],
+                &mut chunk.terminated[rows.clone()],
+                &mut chunk.truncated[rows],
+                &mut chunk.episodes,
+            );
+        }
+        chunk
+            .last_observations
+            .copy_from_slice(self.env.observations());
+        chunk.collect_seconds = start.elapsed().as_secs_f32();
+        Ok(())
+    }
+}
+
+/// Errors of the actor.
+#[derive(Debug, thiserror::Error)]
+pub enum ActorError {
+    #[error("dimension mismatch: {0}")]
+    Dims(String),
+    #[error("policy: {0}")]
+    Policy(String),
+    #[error("weights for {robot} v{version}: {message}")]
+    Weights {
+        robot: String,
+        version: u64,
+        message: String,
+    },
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    #[error("{0}")]
+    Name(#[from] keys::KeyError),
+}
+
+fn zerr(e: impl std::fmt::Display) -> ActorError {
+    ActorError::Zenoh(e.to_string())
+}
+
+/// Identity and sizes of one actor.
+#[derive(Debug, Clone)]
+pub struct ActorOptions {
+    pub run: String,
+    pub robot: String,
+    pub actor_id: String,
+    /// Control steps per env per chunk (rsl_rl's `num_steps_per_env`, 24).
+    pub steps_per_env: usize,
+    pub seed: u64,
+    /// Stop after this many chunks (0: until cancelled). For tests and benchmarks.
+    pub max_chunks: u64,
+}
+
+fn unix_ms() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_millis() as u64)
+        .unwrap_or(0)
+}
+
+/// Fetch and verify the weights an announce names for `robot`.
+pub async fn fetch_policy(
+    session: &Session,
+    announce: &PolicyAnnounce,
+    robot: &str,
+) -> Result<DeployPolicy, ActorError> {
+    let fail = |message: String| ActorError::Weights {
+        robot: robot.into(),
+        version: announce.version,
+        message,
+    };
+    let entry = announce
+        .robots
+        .iter()
+        .find(|r| r.robot == robot)
+        .ok_or_else(|| {
+            fail(format!(
+                "the learner does not train this robot (it trains {:?})",
+                announce.robots.iter().map(|r| &r.robot).collect::<Vec<_>>()
+            ))
+        })?;
+    let replies = session
+        .get(keys::policy_weights(&announce.run, robot, announce.version))
+        .timeout(Duration::from_secs(30))
+        .await
+        .map_err(zerr)?;
+    let mut last_error = String::from("no reply (hint: is the learner running?)");
+    while let Ok(reply) = replies.recv_async().await {
+        match reply.result() {
+            Ok(sample) => {
+                let blob: WeightsBlob =
+                    codec::decode(&sample.payload().to_bytes()).map_err(|e| fail(e.to_string()))?;
+                let sha = hex::encode(Sha256::digest(&blob.bytes));
+                if sha != entry.sha256 || sha != blob.sha256 {
+                    return Err(fail(format!(
+                        "sha256 mismatch: announce {}, blob says {}, bytes hash to {sha}",
+                        entry.sha256, blob.sha256
+                    )));
+                }
+                return DeployPolicy::from_bytes(&blob.bytes).map_err(|e| fail(e.to_string()));
+            }
+            Err(err) => {
+                last_error = String::from_utf8_lossy(&err.payload().to_bytes()).into_owned()
+            }
+        }
+    }
+    Err(fail(last_error))
+}
+
+/// Run the actor daemon until cancelled (or `max_chunks`).
+pub async fn run<E: RolloutEnv>(
+    session: Session,
+    opts: ActorOptions,
+    env: E,
+    cancel: CancellationToken,
+) -> Result<u64, ActorError> {
+    keys::validate_segment("run", &opts.run)?;
+    keys::validate_segment("robot", &opts.robot)?;
+    keys::validate_segment("actor", &opts.actor_id)?;
+    let (n, od, ad) = (env.num_envs(), env.obs_dim(), env.action_dim());
+    let _token = session
+        .liveliness()
+        .declare_token(keys::actor_liveliness(
+            &opts.run,
+            &opts.robot,
+            &opts.actor_id,
+        ))
+        .await
+        .map_err(zerr)?;
+    let announces = session
+        .declare_subscriber(keys::policy_announce(&opts.run))
+        .await
+        .map_err(zerr)?;
+    let publisher = session
+        .declare_publisher(keys::rollout(&opts.run, &opts.robot, &opts.actor_id))
+        .congestion_control(CongestionControl::Block)
+        .await
+        .map_err(zerr)?;
+    let metrics_source = format!("actor-{}-{}", opts.robot, opts.actor_id);
+    let metrics_key = keys::metrics(&opts.run, &metrics_source);
+
+    let mut collector = Some(Collector::new(env, opts.seed));
+    let mut chunk = Some(RolloutChunk::zeros(
+        &opts.run,
+        &opts.robot,
+        &opts.actor_id,
+        0,
+        n,
+        opts.steps_per_env,
+        od,
+        ad,
+    ));
+    let mut policy: Option<(u64, DeployPolicy)> = None;
+    let mut last_collected: Option<u64> = None;
+    let mut seq = 0u64;
+    info!(robot = %opts.robot, actor = %opts.actor_id, envs = n, "actor ready, waiting for a policy");
+
+    loop {
+        if opts.max_chunks > 0 && seq >= opts.max_chunks {
+            break;
+        }
+        // The newest announce we have not collected for yet.
+        let announce = tokio::select! {
+            _ = cancel.cancelled() => break,
+            sample = announces.recv_async() => match sample {
+                Ok(s) => match codec::decode_json::<PolicyAnnounce>(&s.payload().to_bytes()) {
+                    Ok(a) => a,
+                    Err(e) => { warn!("ignored announce: {e}"); continue; }
+                },
+                Err(_) => break,
+            },
+        };
+        if last_collected.is_some_and(|v| announce.version <= v) {
+            continue;
+        }
+        let fetch_start = Instant::now();
+        if policy.as_ref().is_none_or(|(v, _)| *v != announce.version) {
+            match fetch_policy(&session, &announce, &opts.robot).await {
+                Ok(p) => policy = Some((announce.version, p)),
+                Err(e) => {
+                    warn!("{e}");
+                    continue;
+                }
+            }
+        }
+        let fetch_seconds = fetch_start.elapsed().as_secs_f64();
+        let Some((version, current)) = policy.clone() else {
+            continue;
+        };
+        let (Some(mut col), Some(mut ch)) = (collector.take(), chunk.take()) else {
+            break;
+        };
+        ch.policy_version = version;
+        ch.seq = seq;
+        let (col, ch, result) = tokio::task::spawn_blocking(move || {
+            let r = col.collect(&current, &mut ch);
+            (col, ch, r)
+        })
+        .await
+        .map_err(|e| ActorError::Zenoh(format!("collector thread: {e}")))?;
+        result?;
+        let send_start = Instant::now();
+        let bytes = codec::encode(&ch).map_err(zerr)?;
+        publisher.put(bytes).await.map_err(zerr)?;
+        let send_seconds = send_start.elapsed().as_secs_f64();
+
+        let mut record = MetricsRecord::new(&opts.run, &metrics_source, version, unix_ms());
+        record.insert("collect_seconds", ch.collect_seconds as f64);
+        record.insert(
+            "steps_per_second",
+            ch.samples() as f64 / (ch.collect_seconds as f64).max(1e-9),
+        );
+        record.insert("send_seconds", send_seconds);
+        record.insert("fetch_seconds", fetch_seconds);
+        record.insert("episodes", ch.episodes.len() as f64);
+        if !ch.episodes.is_empty() {
+            let k = ch.episodes.len() as f64;
+            record.insert(
+                "episode_return",
+                ch.episodes
+                    .iter()
+                    .map(|e| e.episode_return as f64)
+                    .sum::<f64>()
+                    / k,
+            );
+            record.insert(
+                "episode_length",
+                ch.episodes.iter().map(|e| e.length as f64).sum::<f64>() / k,
+            );
+            record.insert(
+                "terrain_level",
+                ch.episodes
+                    .iter()
+                    .map(|e| e.terrain_level as f64)
+                    .sum::<f64>()
+                    / k,
+            );
+            record.insert(
+                "lin_vel_error",
+                ch.episodes
+                    .iter()
+                    .map(|e| e.lin_vel_error as f64)
+                    .sum::<f64>()
+                    / k,
+            );
+            record.insert(
+                "yaw_rate_error",
+                ch.episodes
+                    .iter()
+                    .map(|e| e.yaw_rate_error as f64)
+                    .sum::<f64>()
+                    / k,
+            );
+        }
+        if let Ok(json) = codec::encode_json(&record) {
+            let _ = session.put(&metrics_key, json).await;
+        }
+        last_collected = Some(version);
+        seq += 1;
+        collector = Some(col);
+        chunk = Some(ch);
+    }
+    Ok(seq)
+}

@@ -1,0 +1,641 @@
+//! The learner daemon: synchronous-with-tolerance PPO over Zenoh (DESIGN §2).
+//!
+//! Main types: [`DaemonConfig`] (the `[learner]` config section), [`LearnerOptions`], [`run`] (the
+//! daemon loop), [`IterationReport`] (what a progress display receives), [`Event`] (everything the
+//! loop reacts to).
+//!
+//! One iteration: announce policy version `k` (JSON on `keys::policy_announce`, repeated every second
+//! so late actors catch up) and serve its weights (`keys::policy_weights`, verified by sha256); gather
+//! chunks for `k` from every live actor (liveliness tokens) or until `gather_timeout_s` passes; drop
+//! chunks older than `k − max_policy_lag` (counted); run the PPO update on a blocking thread; publish
+//! metrics; checkpoint every `checkpoint_every` iterations (and on shutdown) so that a restarted
+//! learner resumes at the same iteration with its optimiser state.
+
+use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, RwLock};
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use l3p_policy::{PolicyConfig, RobotSpec};
+use l3p_proto::{
+    MetricsRecord, PolicyAnnounce, RobotWeights, RolloutChunk, WIRE_VERSION, WeightsBlob, codec,
+    keys,
+};
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use tokio::sync::mpsc;
+use tokio_util::sync::CancellationToken;
+use tracing::{debug, info, warn};
+use zenoh::Session;
+use zenoh::sample::SampleKind;
+
+use crate::{LearnerError, Mode, Ppo, PpoConfig, RolloutBatch, UpdateMetrics};
+
+/// `[learner]` config section: how the daemon gathers data and keeps state.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DaemonConfig {
+    /// Chunks produced by a policy more than this many versions old are dropped (and counted).
+    pub max_policy_lag: u64,
+    /// Start the update with what has arrived after this many seconds, even if a live actor is silent.
+    pub gather_timeout_s: f64,
+    /// Live actors needed before the first update starts.
+    pub min_actors: usize,
+    /// Write a checkpoint every this many iterations (and always on shutdown).
+    pub checkpoint_every: u64,
+    /// Stop after this many iterations (0: run until stopped).
+    pub max_iterations: u64,
+    /// Checkpoint to initialise from in the transfer modes.
+    pub init_from: Option<PathBuf>,
+}
+
+impl Default for DaemonConfig {
+    fn default() -> Self {
+        Self {
+            max_policy_lag: 0,
+            gather_timeout_s: 120.0,
+            min_actors: 1,
+            checkpoint_every: 25,
+            max_iterations: 1500,
+            init_from: None,
+        }
+    }
+}
+
+/// Everything the learner daemon needs, assembled by the binary from the config file.
+#[derive(Debug, Clone)]
+pub struct LearnerOptions {
+    pub run: String,
+    /// `<data_dir>/<run>`: metrics file and local checkpoints live here.
+    pub run_dir: PathBuf,
+    pub daemon: DaemonConfig,
+    pub ppo: PpoConfig,
+    pub policy: PolicyConfig,
+    /// Robots this run trains, with their observation and action sizes.
+    pub robots: Vec<RobotSpec>,
+}
+
+/// What the loop reacts to.
+#[derive(Debug)]
+pub enum Event {
+    /// A decoded, validated chunk.
+    Chunk(Box<RolloutChunk>),
+    /// A chunk that failed to decode or validate (already logged).
+    Rejected,
+    /// An actor's liveliness token appeared (`robot/actor`).
+    ActorUp(String),
+    /// An actor's liveliness token disappeared.
+    ActorDown(String),
+}
+
+/// Sent to a progress display after every update.
+#[derive(Debug, Clone)]
+pub struct IterationReport {
+    pub iteration: u64,
+    pub max_iterations: u64,
+    pub metrics: MetricsRecord,
+}
+
+/// How the daemon ended.
+#[derive(Debug, Clone)]
+pub struct LearnerSummary {
+    pub iterations: u64,
+    pub dropped_chunks: u64,
+    pub rejected_chunks: u64,
+}
+
+/// Errors that stop the learner daemon (bad input never does: it is logged and counted).
+#[derive(Debug, thiserror::Error)]
+pub enum DaemonError {
+    #[error(transparent)]
+    Learner(#[from] LearnerError),
+    #[error("zenoh: {0}")]
+    Zenoh(String),
+    #[error("cannot write {path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+}
+
+fn zerr(e: impl std::fmt::Display) -> DaemonError {
+    DaemonError::Zenoh(e.to_string())
+}
+
+/// Weights of the current policy version, shared with the queryable task.
+#[derive(Default)]
+struct Published {
+    version: u64,
+    /// Encoded [`WeightsBlob`] per robot.
+    blobs: HashMap<String, Vec<u8>>,
+}
+
+/// Local checkpoint file of a run.
+pub fn checkpoint_path(run_dir: &Path) -> PathBuf {
+    run_dir.join("checkpoints").join("latest.ckpt")
+}
+
+/// Metrics file of a run (one JSON record per line).
+pub fn metrics_path(run_dir: &Path) -> PathBuf {
+    run_dir.join("metrics.jsonl")
+}
+
+fn unix_ms() -> u64 {
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_millis() as u64)
+        .unwrap_or(0)
+}
+
+fn sha256_hex(bytes: &[u8]) -> String {
+    hex::encode(Sha256::digest(bytes))
+}
+
+/// Build the PPO state: resume from the run's checkpoint when there is one, else start per mode.
+fn start_ppo(opts: &LearnerOptions) -> Result<Ppo, LearnerError> {
+    let device = l3p_policy::train_device();
+    let path = checkpoint_path(&opts.run_dir);
+    if path.exists() {
+        let ppo = Ppo::load(opts.ppo.clone(), &path, device)?;
+        info!(iteration = ppo.iteration(), path = %path.display(), "resumed from checkpoint");
+        return Ok(ppo);
+    }
+    let init_from = match opts.ppo.mode {
+        Mode::Mlp | Mode::L3p => None,
+        _ => opts.daemon.init_from.as_deref(),
+    };
+    let model = crate::init_model(
+        opts.ppo.mode,
+        opts.policy.clone(),
+        opts.robots.clone(),
+        init_from,
+        &device,
+    )?;
+    info!(mode = opts.ppo.mode.as_str(), "{}", model.param_report());
+    Ppo::new(opts.ppo.clone(), model, device)
+}
+
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), DaemonError> {
+    let io = |source| DaemonError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(io)?;
+    }
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, bytes).map_err(io)?;
+    std::fs::File::open(&tmp)
+        .and_then(|f| f.sync_all())
+        .map_err(io)?;
+    std::fs::rename(&tmp, path).map_err(io)
+}
+
+/// Encode each robot's weights for `version` and make them the ones served.
+fn publish_weights(
+    ppo: &Ppo,
+    run: &str,
+    robots: &[RobotSpec],
+    published: &RwLock<Published>,
+) -> Result<Vec<RobotWeights>, DaemonError> {
+    let version = ppo.iteration();
+    let mut blobs = HashMap::new();
+    let mut entries = Vec::new();
+    for spec in robots {
+        let (bytes, config) = ppo.export(&spec.name)?;
+        let sha256 = sha256_hex(&bytes);
+        entries.push(RobotWeights {
+            robot: spec.name.clone(),
+            sha256: sha256.clone(),
+            size: bytes.len() as u64,
+            obs_dim: config.obs_dim as u32,
+            action_dim: config.action_dim as u32,
+        });
+        let blob = WeightsBlob {
+            wire_version: WIRE_VERSION,
+            run: run.to_string(),
+            robot: spec.name.clone(),
+            version,
+            format: l3p_policy::EXPORT_FORMAT.to_string(),
+            sha256,
+            bytes,
+        };
+        let encoded = codec::encode(&blob).map_err(|e| DaemonError::Zenoh(e.to_string()))?;
+        blobs.insert(spec.name.clone(), encoded);
+    }
+    if let Ok(mut p) = published.write() {
+        *p = Published { version, blobs };
+    }
+    Ok(entries)
+}
+
+/// Append one metrics record to the run's file and publish it on Zenoh.
+async fn emit_metrics(
+    session: &Session,
+    file: &Path,
+    record: &MetricsRecord,
+) -> Result<(), DaemonError> {
+    use std::io::Write;
+    let json = codec::encode_json(record).map_err(zerr)?;
+    let io = |source| DaemonError::Io {
+        path: file.to_path_buf(),
+        source,
+    };
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(file)
+        .map_err(io)?;
+    f.write_all(&json)
+        .and_then(|_| f.write_all(b"\n"))
+        .map_err(io)?;
+    session
+        .put(keys::metrics(&record.run, &record.source), json)
+        .await
+        .map_err(zerr)?;
+    Ok(())
+}
+
+/// Aggregate the episode statistics of the chunks into the iteration's metrics.
+fn episode_metrics(record: &mut MetricsRecord, chunks: &[RolloutChunk]) {
+    let episodes: Vec<_> = chunks.iter().flat_map(|c| c.episodes.iter()).collect();
+    record.insert("episodes", episodes.len() as f64);
+    if episodes.is_empty() {
+        return;
+    }
+    let n = episodes.len() as f64;
+    let mean = |f: &dyn Fn(&l3p_proto::EpisodeStats) -> f64| {
+        episodes.iter().map(|e| f(e)).sum::<f64>() / n
+    };
+    record.insert("episode_return", mean(&|e| e.episode_return as f64));
+    record.insert("episode_length", mean(&|e| e.length as f64));
+    record.insert("terrain_level", mean(&|e| e.terrain_level as f64));
+    record.insert("lin_vel_error", mean(&|e| e.lin_vel_error as f64));
+    record.insert("yaw_rate_error", mean(&|e| e.yaw_rate_error as f64));
+    record.insert(
+        "fall_fraction",
+        mean(&|e| if e.terminated { 1.0 } else { 0.0 }),
+    );
+    let mut by_type: BTreeMap<u8, (f64, f64)> = BTreeMap::new();
+    for e in &episodes {
+        let slot = by_type.entry(e.terrain_type).or_default();
+        slot.0 += e.terrain_level as f64;
+        slot.1 += 1.0;
+    }
+    for (kind, (sum, count)) in by_type {
+        record.insert(&format!("terrain_level/type{kind}"), sum / count);
+    }
+}
+
+fn update_metrics(record: &mut MetricsRecord, m: &UpdateMetrics) {
+    for (key, value) in [
+        ("approx_kl", m.approx_kl as f64),
+        ("clip_fraction", m.clip_fraction as f64),
+        ("explained_variance", m.explained_variance as f64),
+        ("learning_rate", m.learning_rate),
+        ("entropy", m.entropy as f64),
+        ("mean_std", m.mean_std as f64),
+        ("surrogate_loss", m.surrogate_loss as f64),
+        ("value_loss", m.value_loss as f64),
+        ("rec_obs_loss", m.rec_obs_loss as f64),
+        ("rec_act_loss", m.rec_act_loss as f64),
+        ("recon_mse", m.recon_mse as f64),
+        ("recon_baseline_mse", m.recon_baseline_mse as f64),
+        ("grad_norm", m.grad_norm as f64),
+        ("mean_step_reward", m.mean_reward as f64),
+        ("update_seconds", m.update_seconds as f64),
+        ("samples", m.samples as f64),
+    ] {
+        record.insert(key, value);
+    }
+}
+
+/// Run the learner daemon until `max_iterations`, cancellation, or a fatal error. `progress`
+/// receives a report after each update.
+pub async fn run(
+    session: Session,
+    opts: LearnerOptions,
+    cancel: CancellationToken,
+    progress: Option<mpsc::UnboundedSender<IterationReport>>,
+) -> Result<LearnerSummary, DaemonError> {
+    keys::validate_segment("run", &opts.run).map_err(|e| DaemonError::Zenoh(e.to_string()))?;
+    std::fs::create_dir_all(&opts.run_dir).map_err(|source| DaemonError::Io {
+        path: opts.run_dir.clone(),
+        source,
+    })?;
+    let metrics_file = metrics_path(&opts.run_dir);
+    let run = opts.run.clone();
+    let dims: HashMap<String, (usize, usize)> = opts
+        .robots
+        .iter()
+        .map(|r| (r.name.clone(), (r.obs_dim, r.action_dim)))
+        .collect();
+
+    let mut ppo = start_ppo(&opts)?;
+    let published = Arc::new(RwLock::new(Published::default()));
+    let mut weights = publish_weights(&ppo, &run, &opts.robots, &published)?;
+
+    // Weights queryable: answers `l3p/<run>/policy/weights/<robot>/<version>`.
+    let queryable = session
+        .declare_queryable(keys::policy_weights_all(&run))
+        .await
+        .map_err(zerr)?;
+    let serve_published = published.clone();
+    let serve_cancel = cancel.clone();
+    let serve_run = run.clone();
+    let serve = tokio::spawn(async move {
+        loop {
+            let query = tokio::select! {
+                _ = serve_cancel.cancelled() => break,
+                q = queryable.recv_async() => match q { Ok(q) => q, Err(_) => break },
+            };
+            let key = query.key_expr().as_str().to_string();
+            let reply = {
+                let p = serve_published.read().ok();
+                let parsed = key.rsplitn(3, '/').collect::<Vec<_>>();
+                match (p, parsed.as_slice()) {
+                    (Some(p), [version, robot, _]) => match version.parse::<u64>() {
+                        Ok(v) if v == p.version => p
+                            .blobs
+                            .get(*robot)
+                            .cloned()
+                            .ok_or_else(|| format!("unknown robot {robot} in run {serve_run}")),
+                        Ok(v) => Err(format!(
+                            "policy version {v} is not served (current {})",
+                            p.version
+                        )),
+                        Err(_) => Err(format!("bad weights key {key}")),
+                    },
+                    _ => Err(format!("bad weights key {key}")),
+                }
+            };
+            let sent = match reply {
+                Ok(bytes) => query.reply(key.clone(), bytes).await,
+                Err(message) => query.reply_err(message.into_bytes()).await,
+            };
+            if let Err(e) = sent {
+                warn!("cannot answer weights query {key}: {e}");
+            }
+        }
+    });
+
+    // Events: rollout chunks and actor liveliness, funnelled into one bounded channel. When the loop
+    // is busy updating, the channel fills and Zenoh's Block congestion control pushes back on actors.
+    let (tx, mut events) = mpsc::channel::<Event>(256);
+    let rollouts = session
+        .declare_subscriber(keys::rollout_all(&run))
+        .await
+        .map_err(zerr)?;
+    let chunk_tx = tx.clone();
+    let chunk_dims = dims.clone();
+    let chunk_run = run.clone();
+    let decode_seconds = Arc::new(std::sync::Mutex::new(0f64));
+    let decode_acc = decode_seconds.clone();
+    let chunk_task = tokio::spawn(async move {
+        while let Ok(sample) = rollouts.recv_async().await {
+            let start = Instant::now();
+            let bytes = sample.payload().to_bytes();
+            let event = match codec::decode::<RolloutChunk>(&bytes) {
+                Err(e) => {
+                    warn!(key = %sample.key_expr(), "rejected chunk: {e}");
+                    Event::Rejected
+                }
+                Ok(chunk) => {
+                    let checked = match chunk_dims.get(&chunk.robot) {
+                        None => Err(format!(
+                            "unknown robot {} (run trains {:?})",
+                            chunk.robot,
+                            chunk_dims.keys()
+                        )),
+                        Some(_) if chunk.run != chunk_run => {
+                            Err(format!("chunk of run {}", chunk.run))
+                        }
+                        Some(&(obs, act)) => {
+                            chunk.validate_dims(obs, act).map_err(|e| e.to_string())
+                        }
+                    };
+                    match checked {
+                        Ok(()) => Event::Chunk(Box::new(chunk)),
+                        Err(e) => {
+                            warn!(key = %sample.key_expr(), "rejected chunk: {e}");
+                            Event::Rejected
+                        }
+                    }
+                }
+            };
+            if let Ok(mut acc) = decode_acc.lock() {
+                *acc += start.elapsed().as_secs_f64();
+            }
+            if chunk_tx.send(event).await.is_err() {
+                break;
+            }
+        }
+    });
+    let liveliness = session
+        .liveliness()
+        .declare_subscriber(keys::actors_all(&run))
+        .history(true)
+        .await
+        .map_err(zerr)?;
+    let live_tx = tx.clone();
+    let live_run = run.clone();
+    let live_task = tokio::spawn(async move {
+        while let Ok(sample) = liveliness.recv_async().await {
+            let Some((robot, actor)) =
+                keys::parse_actor_liveliness(&live_run, sample.key_expr().as_str())
+            else {
+                continue;
+            };
+            let id = format!("{robot}/{actor}");
+            let event = match sample.kind() {
+                SampleKind::Put => Event::ActorUp(id),
+                SampleKind::Delete => Event::ActorDown(id),
+            };
+            if live_tx.send(event).await.is_err() {
+                break;
+            }
+        }
+    });
+    drop(tx);
+
+    let announce_key = keys::policy_announce(&run);
+    let mut live: BTreeSet<String> = BTreeSet::new();
+    let mut pending: BTreeMap<String, RolloutChunk> = BTreeMap::new();
+    let mut dropped = 0u64;
+    let mut rejected = 0u64;
+    let mut gather_start = Instant::now();
+    let mut weights_seconds = 0f64;
+    let mut last_checkpoint = ppo.iteration();
+    let max_iterations = opts.daemon.max_iterations;
+    let mut tick = tokio::time::interval(Duration::from_millis(500));
+    let announce = |version: u64, weights: &Vec<RobotWeights>| PolicyAnnounce {
+        wire_version: WIRE_VERSION,
+        run: run.clone(),
+        version,
+        mode: opts.ppo.mode.as_str().to_string(),
+        robots: weights.clone(),
+        max_policy_lag: opts.daemon.max_policy_lag,
+    };
+
+    let outcome: Result<(), DaemonError> = loop {
+        if max_iterations > 0 && ppo.iteration() >= max_iterations {
+            info!(iteration = ppo.iteration(), "reached max_iterations");
+            break Ok(());
+        }
+        let version = ppo.iteration();
+        tokio::select! {
+            _ = cancel.cancelled() => break Ok(()),
+            _ = tick.tick() => {
+                let message = announce(version, &weights);
+                let json = codec::encode_json(&message).map_err(zerr)?;
+                if let Err(e) = session.put(&announce_key, json).await {
+                    warn!("cannot announce policy {version}: {e}");
+                }
+            }
+            event = events.recv() => match event {
+                None => break Err(DaemonError::Zenoh("subscriptions closed".into())),
+                Some(Event::Rejected) => rejected += 1,
+                Some(Event::ActorUp(id)) => { info!(actor = %id, "actor joined"); live.insert(id); }
+                Some(Event::ActorDown(id)) => { info!(actor = %id, "actor left"); live.remove(&id); }
+                Some(Event::Chunk(chunk)) => {
+                    let lag = version.saturating_sub(chunk.policy_version);
+                    if chunk.policy_version > version || lag > opts.daemon.max_policy_lag {
+                        debug!(actor = %chunk.actor_id, chunk_version = chunk.policy_version, version, "dropped stale chunk");
+                        dropped += 1;
+                    } else {
+                        let id = format!("{}/{}", chunk.robot, chunk.actor_id);
+                        if let Some(old) = pending.insert(id, *chunk) {
+                            debug!(actor = %old.actor_id, "replaced an older chunk of the same actor");
+                            dropped += 1;
+                        }
+                    }
+                }
+            },
+        }
+
+        let waited = gather_start.elapsed().as_secs_f64();
+        let everyone_reported = live.len() >= opts.daemon.min_actors
+            && !live.is_empty()
+            && live.iter().all(|id| pending.contains_key(id));
+        let timed_out = waited > opts.daemon.gather_timeout_s && !pending.is_empty();
+        if !(everyone_reported || timed_out) {
+            continue;
+        }
+        if timed_out && !everyone_reported {
+            warn!(
+                waited_s = waited,
+                have = pending.len(),
+                live = live.len(),
+                "gather timeout: updating with what arrived"
+            );
+        }
+
+        // Update on a blocking thread; the subscription tasks keep buffering meanwhile.
+        let chunks: Vec<RolloutChunk> = std::mem::take(&mut pending).into_values().collect();
+        let collect_seconds = chunks
+            .iter()
+            .map(|c| c.collect_seconds as f64)
+            .fold(0.0, f64::max);
+        let iteration_start = Instant::now();
+        let (returned, result) = tokio::task::spawn_blocking(move || {
+            let result =
+                RolloutBatch::from_chunks(chunks.iter()).and_then(|batch| ppo.update(&batch));
+            (ppo, result.map(|m| (m, chunks)))
+        })
+        .await
+        .map_err(|e| DaemonError::Zenoh(format!("update thread: {e}")))?;
+        ppo = returned;
+        let (update, chunks) = match result {
+            Ok(ok) => ok,
+            Err(e) => break Err(e.into()),
+        };
+        let w_start = Instant::now();
+        weights = publish_weights(&ppo, &run, &opts.robots, &published)?;
+        weights_seconds += w_start.elapsed().as_secs_f64();
+        let new_version = ppo.iteration();
+        let json = codec::encode_json(&announce(new_version, &weights)).map_err(zerr)?;
+        if let Err(e) = session.put(&announce_key, json).await {
+            warn!("cannot announce policy {new_version}: {e}");
+        }
+
+        let iteration_seconds = waited + iteration_start.elapsed().as_secs_f64();
+        let decode = decode_seconds
+            .lock()
+            .map(|mut d| std::mem::take(&mut *d))
+            .unwrap_or(0.0);
+        let mut record = MetricsRecord::new(&run, "learner", new_version, unix_ms());
+        update_metrics(&mut record, &update);
+        episode_metrics(&mut record, &chunks);
+        record.insert("iteration_seconds", iteration_seconds);
+        record.insert("collect_seconds", collect_seconds);
+        record.insert(
+            "samples_per_second",
+            update.samples as f64 / iteration_seconds.max(1e-9),
+        );
+        record.insert("actors", live.len() as f64);
+        record.insert("dropped_chunks", dropped as f64);
+        record.insert("rejected_chunks", rejected as f64);
+        let transport = decode + weights_seconds;
+        record.insert("transport_seconds", transport);
+        record.insert("transport_share", transport / iteration_seconds.max(1e-9));
+        weights_seconds = 0.0;
+        emit_metrics(&session, &metrics_file, &record).await?;
+        if let Some(progress) = &progress {
+            let _ = progress.send(IterationReport {
+                iteration: new_version,
+                max_iterations,
+                metrics: record,
+            });
+        }
+        if new_version - last_checkpoint >= opts.daemon.checkpoint_every.max(1) {
+            write_atomic(&checkpoint_path(&opts.run_dir), &ppo.checkpoint_bytes()?)?;
+            last_checkpoint = new_version;
+        }
+        gather_start = Instant::now();
+    };
+
+    // Final checkpoint, whatever stopped us.
+    if ppo.iteration() != last_checkpoint || !checkpoint_path(&opts.run_dir).exists() {
+        write_atomic(&checkpoint_path(&opts.run_dir), &ppo.checkpoint_bytes()?)?;
+        info!(iteration = ppo.iteration(), "final checkpoint written");
+    }
+    cancel.cancel();
+    chunk_task.abort();
+    live_task.abort();
+    let _ = serve.await;
+    outcome?;
+    Ok(LearnerSummary {
+        iterations: ppo.iteration(),
+        dropped_chunks: dropped,
+        rejected_chunks: rejected,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn episode_metrics_average_and_split_by_terrain_type() {
+        let mut chunk = RolloutChunk::zeros("r", "a1", "0", 0, 1, 1, 1, 1);
+        for (level, kind, terminated) in [(2.0, 0, false), (4.0, 0, true), (1.0, 3, false)] {
+            chunk.episodes.push(l3p_proto::EpisodeStats {
+                episode_return: 3.0,
+                length: 100,
+                terrain_level: level,
+                terrain_type: kind,
+                lin_vel_error: 0.1,
+                yaw_rate_error: 0.2,
+                terminated,
+            });
+        }
+        let mut record = MetricsRecord::new("r", "learner", 1, 0);
+        episode_metrics(&mut record, &[chunk]);
+        assert_eq!(record.values["episodes"], 3.0);
+        assert!((record.values["terrain_level"] - 7.0 / 3.0).abs() < 1e-9);
+        assert_eq!(record.values["terrain_level/type0"], 3.0);
+        assert_eq!(record.values["terrain_level/type3"], 1.0);
+        assert!((record.values["fall_fraction"] - 1.0 / 3.0).abs() < 1e-9);
+    }
+}
