@@ -327,7 +327,8 @@ pub struct TerminationConfig {
     /// Base (trunk) contact force norm above which the episode is terminated (N). IsaacLab: 1.0.
     pub base_contact_threshold: f32,
     /// Fall guard (not in IsaacLab): terminate when the base tilt (angle between the base z axis
-    /// and world up) exceeds this many radians. `None` disables it.
+    /// and world up) exceeds this many radians. A value >= π (e.g. 4.0) never triggers; `None`
+    /// (not writable in TOML) disables it too.
     pub max_tilt_rad: Option<f32>,
     /// Fall guard (not in IsaacLab): terminate when the base is less than this height above the
     /// terrain under it (m). Robot-specific, so off by default.
@@ -474,10 +475,12 @@ pub struct RandomizationConfig {
     pub dynamic_friction: [f32; 2],
     /// Mass added to the base (kg).
     pub added_base_mass: [f32; 2],
-    /// Half-ranges of a uniform base centre-of-mass shift (m), `None` = off.
-    pub base_com_offset: Option<[f32; 3]>,
-    /// Push interval range (s), drawn per push per env; `None` disables pushes.
-    pub push_interval_s: Option<[f32; 2]>,
+    /// Half-ranges of a uniform base centre-of-mass shift (m); zeros = off.
+    pub base_com_offset: [f32; 3],
+    /// Whether pushes happen (IsaacLab `push_robot`; off for A1/Go1/Go2).
+    pub pushes: bool,
+    /// Push interval range (s), drawn per push per env.
+    pub push_interval_s: [f32; 2],
     /// Pushes set the base x and y velocity to `U(−v, v)` (m/s).
     pub push_velocity_xy: f32,
     /// Reset: base xy offset from the tile origin `U(−d, d)` (m).
@@ -497,8 +500,9 @@ impl Default for RandomizationConfig {
             static_friction: [0.8, 0.8],
             dynamic_friction: [0.6, 0.6],
             added_base_mass: [-5.0, 5.0],
-            base_com_offset: Some([0.05, 0.05, 0.01]),
-            push_interval_s: Some([10.0, 15.0]),
+            base_com_offset: [0.05, 0.05, 0.01],
+            pushes: true,
+            push_interval_s: [10.0, 15.0],
             push_velocity_xy: 0.5,
             reset_base_xy: 0.5,
             reset_yaw: std::f32::consts::PI,
@@ -517,8 +521,8 @@ impl RandomizationConfig {
         match RobotFamily::from_name(robot) {
             RobotFamily::Unitree => {
                 r.added_base_mass = [-1.0, 3.0];
-                r.base_com_offset = None;
-                r.push_interval_s = None;
+                r.base_com_offset = [0.0; 3];
+                r.pushes = false;
                 r.reset_joint_pos_scale = [1.0, 1.0];
                 r.reset_base_velocity = 0.0;
             }
@@ -526,7 +530,7 @@ impl RandomizationConfig {
                 r.static_friction = [0.3, 1.0];
                 r.dynamic_friction = [0.3, 0.8];
                 r.added_base_mass = [-2.5, 2.5];
-                r.base_com_offset = None;
+                r.base_com_offset = [0.0; 3];
             }
             RobotFamily::Anymal | RobotFamily::Other => {}
         }
@@ -540,8 +544,9 @@ overrides! {
         static_friction: [f32; 2],
         dynamic_friction: [f32; 2],
         added_base_mass: [f32; 2],
-        base_com_offset: Option<[f32; 3]>,
-        push_interval_s: Option<[f32; 2]>,
+        base_com_offset: [f32; 3],
+        pushes: bool,
+        push_interval_s: [f32; 2],
         push_velocity_xy: f32,
         reset_base_xy: f32,
         reset_yaw: f32,
@@ -598,6 +603,107 @@ impl Default for EnvConfig {
         }
     }
 }
+
+/// A commented `[env]` section with every key at its default (for `configs/reference.toml`; parsed
+/// by a test). Keys are relative to `[env]`.
+pub const REFERENCE_ENV_TOML: &str = r#"
+# Physics step (s), physics steps per policy step, episode length (s): IsaacLab 2.1.
+sim_dt = 0.005
+decimation = 4
+episode_length_s = 20.0
+# 48 proprioceptive observations, plus 187 height samples (17 x 11, 0.1 m, yaw-aligned) when true.
+height_scan = true
+# Final clip of observations; clip of raw actions (non-finite actions become 0).
+obs_clip = 100.0
+action_clip = 100.0
+
+[terrain]
+# flat | simple-rough | curriculum | paper
+preset = "curriculum"
+num_rows = 10
+num_cols = 20
+tile_size = 8.0
+# Height-grid spacing (m): 0.05 keeps stair risers within 5 cm (0.1 is IsaacLab's height-field scale).
+horizontal_resolution = 0.05
+border_width = 20.0
+max_init_level = 5
+seed = 0
+# Optional overrides of the preset (uncomment):
+# stairs_step_height = [0.05, 0.23]
+# boxes_height = [0.05, 0.2]
+# rough_noise = [0.02, 0.10]
+# rough_noise_step = 0.02
+# slope = [0.0, 0.4]
+# curriculum = true
+# [terrain.proportions]
+# pyramid_stairs = 0.2
+# inverted_pyramid_stairs = 0.2
+# boxes = 0.2
+# random_rough = 0.2
+# pyramid_slope = 0.1
+# inverted_pyramid_slope = 0.1
+# flat = 0.0
+
+[commands]
+lin_vel_x = [-1.0, 1.0]
+lin_vel_y = [-1.0, 1.0]
+ang_vel_z = [-1.0, 1.0]
+heading = [-3.1415927, 3.1415927]
+heading_command = true
+heading_stiffness = 0.5
+rel_heading_envs = 1.0
+rel_standing_envs = 0.02
+resampling_time_s = [10.0, 10.0]
+
+[noise]
+enabled = true
+lin_vel = 0.1
+ang_vel = 0.2
+gravity = 0.05
+joint_pos = 0.01
+joint_vel = 1.5
+height_scan = 0.1
+
+[termination]
+base_contact_threshold = 1.0
+# Fall guards (not in IsaacLab): tilt from upright (rad; 4.0 disables it), base height above terrain.
+max_tilt_rad = 1.4
+# min_base_height = 0.1
+
+[reward_params]
+tracking_std = 0.5
+air_time_threshold = 0.5
+air_time_min_command = 0.1
+contact_threshold = 1.0
+
+# Weights default to the robot's IsaacLab table (RewardScales::for_robot); set a key to override it.
+[rewards]
+# track_lin_vel_xy_exp = 1.0
+# track_ang_vel_z_exp = 0.5
+# lin_vel_z_l2 = -2.0
+# ang_vel_xy_l2 = -0.05
+# dof_torques_l2 = -1.0e-5
+# dof_acc_l2 = -2.5e-7
+# action_rate_l2 = -0.01
+# feet_air_time = 0.125
+# undesired_contacts = -1.0
+# flat_orientation_l2 = 0.0
+# dof_pos_limits = 0.0
+
+# Randomisation defaults to the robot's IsaacLab events (RandomizationConfig::for_robot).
+[randomization]
+# static_friction = [0.8, 0.8]
+# dynamic_friction = [0.6, 0.6]
+# added_base_mass = [-5.0, 5.0]
+# base_com_offset = [0.05, 0.05, 0.01]
+# pushes = true
+# push_interval_s = [10.0, 15.0]
+# push_velocity_xy = 0.5
+# reset_base_xy = 0.5
+# reset_yaw = 3.1415927
+# reset_base_velocity = 0.5
+# reset_joint_pos_scale = [0.5, 1.5]
+"#;
 
 /// Number of proprioceptive observations.
 pub const PROPRIO_OBS: usize = 48;
@@ -763,14 +869,10 @@ impl EnvConfig {
         check_nonneg("randomization.static_friction", rz.static_friction[0])?;
         check_nonneg("randomization.dynamic_friction", rz.dynamic_friction[0])?;
         check_range("randomization.added_base_mass", rz.added_base_mass)?;
-        if let Some(p) = rz.push_interval_s {
-            check_range("randomization.push_interval_s", p)?;
-            check_pos("randomization.push_interval_s", p[0])?;
-        }
-        if let Some(o) = rz.base_com_offset {
-            for v in o {
-                check_nonneg("randomization.base_com_offset", v)?;
-            }
+        check_range("randomization.push_interval_s", rz.push_interval_s)?;
+        check_pos("randomization.push_interval_s", rz.push_interval_s[0])?;
+        for v in rz.base_com_offset {
+            check_nonneg("randomization.base_com_offset", v)?;
         }
         check_nonneg("randomization.push_velocity_xy", rz.push_velocity_xy)?;
         check_nonneg("randomization.reset_base_xy", rz.reset_base_xy)?;
@@ -848,7 +950,8 @@ mod tests {
         assert_eq!(spec.terrain.params.stairs_step_height, [0.05, 0.23]);
         assert_eq!(spec.terrain.params.slope, [0.0, 0.4]);
         assert!(spec.terrain.curriculum);
-        assert_eq!(spec.randomization.push_interval_s, Some([10.0, 15.0]));
+        assert!(spec.randomization.pushes);
+        assert_eq!(spec.randomization.push_interval_s, [10.0, 15.0]);
     }
 
     #[test]
@@ -866,7 +969,7 @@ mod tests {
         assert_eq!(anymal_flat.feet_air_time, 0.5);
         assert_eq!(anymal_flat.undesired_contacts, -1.0);
         let r = RandomizationConfig::for_robot("go1");
-        assert_eq!(r.push_interval_s, None);
+        assert!(!r.pushes);
         assert_eq!(r.added_base_mass, [-1.0, 3.0]);
         let t = TerrainConfig::default().resolve("a1").unwrap();
         assert_eq!(t.params.boxes_height, [0.025, 0.1]);
@@ -883,6 +986,7 @@ mod tests {
             [rewards]
             feet_air_time = 0.3
             [randomization]
+            pushes = true
             push_interval_s = [5.0, 6.0]
             "#,
         )
@@ -894,9 +998,38 @@ mod tests {
             spec.rewards.track_lin_vel_xy_exp, 1.5,
             "other weights keep the A1 table"
         );
-        assert_eq!(spec.randomization.push_interval_s, Some([5.0, 6.0]));
+        assert!(spec.randomization.pushes);
+        assert_eq!(spec.randomization.push_interval_s, [5.0, 6.0]);
         assert_eq!(spec.randomization.added_base_mass, [-1.0, 3.0]);
         assert_eq!(spec.terrain.params.stairs_step_height, [0.05, 0.8]);
+    }
+
+    #[test]
+    fn reference_toml_parses_to_the_defaults() {
+        let cfg = EnvConfig::from_toml_str(REFERENCE_ENV_TOML).unwrap();
+        assert_eq!(cfg, EnvConfig::default());
+    }
+
+    #[test]
+    fn serialised_config_round_trips() {
+        let mut cfg = EnvConfig::default();
+        cfg.terrain.preset = TerrainPreset::SimpleRough;
+        cfg.terrain.slope = Some([0.1, 0.2]);
+        cfg.rewards.feet_air_time = Some(0.7);
+        cfg.randomization.pushes = Some(false);
+        let text = toml::to_string(&cfg).unwrap();
+        let back = EnvConfig::from_toml_str(&text).unwrap();
+        assert_eq!(back.terrain, cfg.terrain);
+        assert_eq!(back.rewards, cfg.rewards);
+        assert_eq!(back.randomization, cfg.randomization);
+        let spec = back.resolve("anymal_c").unwrap();
+        assert_eq!(spec.terrain.params.slope, [0.1, 0.2]);
+        assert!(!spec.terrain.curriculum);
+        assert_eq!(spec.rewards.feet_air_time, 0.7);
+        assert_eq!(
+            spec.rewards.flat_orientation_l2, 0.0,
+            "simple-rough uses the rough table"
+        );
     }
 
     #[test]

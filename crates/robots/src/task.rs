@@ -627,9 +627,11 @@ impl Task {
         env.last_joint_vel = state.joint_vel;
         self.resample_command(&mut env.command, rng);
         self.apply_command_modes(&mut env.command, state);
-        env.push_time_left = match self.spec.randomization.push_interval_s {
-            Some(r) => uniform(rng, r),
-            None => f32::INFINITY,
+        let rz = &self.spec.randomization;
+        env.push_time_left = if rz.pushes {
+            uniform(rng, rz.push_interval_s)
+        } else {
+            f32::INFINITY
         };
     }
 
@@ -673,10 +675,8 @@ impl Task {
         let static_friction = uniform(rng, r.static_friction);
         let dynamic_friction = uniform(rng, r.dynamic_friction).min(static_friction);
         let added_base_mass = uniform(rng, r.added_base_mass);
-        let base_com_offset = match r.base_com_offset {
-            Some(h) => [sym(rng, h[0]), sym(rng, h[1]), sym(rng, h[2])],
-            None => [0.0; 3],
-        };
+        let h = r.base_com_offset;
+        let base_com_offset = [sym(rng, h[0]), sym(rng, h[1]), sym(rng, h[2])];
         BodyRandomization {
             static_friction,
             dynamic_friction,
@@ -692,7 +692,10 @@ impl Task {
         env: &mut TaskEnvState,
         rng: &mut R,
     ) -> Option<[f32; 2]> {
-        let interval = self.spec.randomization.push_interval_s?;
+        if !self.spec.randomization.pushes {
+            return None;
+        }
+        let interval = self.spec.randomization.push_interval_s;
         env.push_time_left -= self.spec.step_dt;
         if env.push_time_left > 0.0 {
             return None;
