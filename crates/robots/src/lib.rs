@@ -6,9 +6,11 @@
 //!
 //! Architecture invariant: this crate knows nothing of burn, Zenoh or tokio.
 
+pub mod actuator;
 pub mod catalog;
 pub mod config;
 pub mod model;
+pub mod sim;
 pub mod task;
 pub mod terrain;
 pub mod urdf;

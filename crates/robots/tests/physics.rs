@@ -1,0 +1,163 @@
+//! Physics sanity: standing under PD, free fall, a sideways push.
+
+use l3p_robots::actuator::Actuator;
+use l3p_robots::catalog::{Gains, RobotSpec};
+use l3p_robots::sim::{ActuatorMode, RobotBinding, SimConfig, SimWorld};
+use l3p_robots::task::{RobotState, projected_gravity};
+use rapier3d::math::{Pose, Vec3};
+
+/// Drops `spec` 2 cm above its nominal standing height, holds the default pose for `seconds` with
+/// `gains`, returns the final state and the nominal height.
+fn stand(spec: &RobotSpec, gains: Gains, seconds: f32, cfg: SimConfig) -> (RobotState, f32) {
+    let model = spec.model().unwrap();
+    let h = spec.nominal_standing_height().unwrap();
+    let mut w = SimWorld::new(cfg);
+    w.add_flat_ground(0.0);
+    let id = w
+        .add_robot(
+            &model,
+            &RobotBinding::from_spec(spec),
+            Actuator::from_spec(spec, gains),
+            Pose::from_translation(Vec3::new(0.0, 0.0, h + 0.02)),
+            &spec.default_pose,
+        )
+        .unwrap();
+    w.set_targets(id, &spec.default_pose);
+    let steps = (seconds / cfg.dt) as usize;
+    let mut s = RobotState::default();
+    for i in 0..steps {
+        if i % 4 == 0 {
+            w.clear_contact_maxima();
+        }
+        w.step();
+    }
+    w.read_state(id, &mut s);
+    (s, h)
+}
+
+#[test]
+fn every_robot_stands_at_its_kinematic_height_with_stiff_gains() {
+    for spec in RobotSpec::all() {
+        let (s, h) = stand(spec, spec.stand_gains, 2.0, SimConfig::default());
+        assert!(s.is_finite(), "{}: non-finite state", spec.name);
+        let z = s.base_pos[2];
+        let g = projected_gravity(s.base_quat);
+        let (st, _) = stand(spec, spec.training_gains, 2.0, SimConfig::default());
+        println!(
+            "{:9} nominal {:.3} m  stand-gains (kp {:>5}, kd {:>4}) {:.3} m ({:+.1}%)  training (kp {}, kd {}) {:.3} m  gz {:.3}  feet {:?}",
+            spec.name,
+            h,
+            spec.stand_gains.kp,
+            spec.stand_gains.kd,
+            z,
+            100.0 * (z - h) / h,
+            spec.training_gains.kp,
+            spec.training_gains.kd,
+            st.base_pos[2],
+            g[2],
+            s.foot_force.map(|f| f.round())
+        );
+        assert!(
+            (z - h).abs() / h < 0.05,
+            "{}: base at {z:.3} m, kinematics say {h:.3} m",
+            spec.name
+        );
+        assert!(
+            g[2] < -0.97,
+            "{}: not upright, projected gravity {g:?}",
+            spec.name
+        );
+        assert!(
+            s.base_pos[0].abs() < 0.1 && s.base_pos[1].abs() < 0.1,
+            "{}: drifted {:?}",
+            spec.name,
+            s.base_pos
+        );
+        // Only the feet touch: their normal forces carry the weight.
+        let weight = spec.model().unwrap().total_mass() * 9.81;
+        let feet: f32 = s.foot_force.iter().sum();
+        assert!(
+            (feet - weight).abs() / weight < 0.25,
+            "{}: feet carry {feet} N of {weight} N",
+            spec.name
+        );
+        assert_eq!(s.base_force, 0.0, "{}: base touches the ground", spec.name);
+    }
+}
+
+#[test]
+fn a_dropped_body_falls_at_g() {
+    let mut w = SimWorld::new(SimConfig::default());
+    let h = w.add_free_ball(Vec3::new(0.0, 0.0, 10.0), 0.1, 1.0);
+    let n = 100; // 0.5 s, no ground
+    for _ in 0..n {
+        w.step();
+    }
+    let (p, v) = w.body_state(h).unwrap();
+    let t = n as f32 * 0.005;
+    let expected = 10.0 - 0.5 * 9.81 * t * t;
+    // Semi-implicit Euler is ahead by g·dt·t/2 ≈ 1.2 cm at 0.5 s.
+    assert!((p.z - expected).abs() < 0.02, "z {} vs {}", p.z, expected);
+    assert!((v.z + 9.81 * t).abs() < 1e-3, "vz {}", v.z);
+    assert!(p.x.abs() < 1e-6 && p.y.abs() < 1e-6);
+}
+
+#[test]
+fn a_pushed_robot_moves_and_stays_finite() {
+    let spec = RobotSpec::by_name("a1").unwrap();
+    let model = spec.model().unwrap();
+    let h = spec.nominal_standing_height().unwrap();
+    let mut w = SimWorld::new(SimConfig::default());
+    w.add_flat_ground(0.0);
+    let id = w
+        .add_robot(
+            &model,
+            &RobotBinding::from_spec(spec),
+            Actuator::from_spec(spec, spec.stand_gains),
+            Pose::from_translation(Vec3::new(0.0, 0.0, h + 0.01)),
+            &spec.default_pose,
+        )
+        .unwrap();
+    for _ in 0..200 {
+        w.step();
+    }
+    let mut s = RobotState::default();
+    w.read_state(id, &mut s);
+    let y0 = s.base_pos[1];
+    w.push_base(id, 0.0, 2.0);
+    let mut max_vy: f32 = 0.0;
+    for _ in 0..400 {
+        w.step();
+        w.read_state(id, &mut s);
+        assert!(s.is_finite());
+        max_vy = max_vy.max(s.base_lin_vel_w[1]);
+    }
+    assert!(max_vy > 1.0, "push did not move the base: {max_vy}");
+    assert!(
+        s.base_pos[1] - y0 > 0.02,
+        "base did not move sideways: {:?}",
+        s.base_pos
+    );
+    // Recovered (upright, near standing height) or fell plausibly (base on the ground, not below it).
+    let g = projected_gravity(s.base_quat);
+    println!("after push: pos {:?}, gravity {:?}", s.base_pos, g);
+    assert!(s.base_pos[2] > 0.0 && s.base_pos[2] < h + 0.1);
+    assert!(
+        s.base_lin_vel_w.iter().all(|v| v.abs() < 5.0),
+        "still flying: {:?}",
+        s.base_lin_vel_w
+    );
+}
+
+#[test]
+fn explicit_torque_mode_also_stands() {
+    let spec = RobotSpec::by_name("a1").unwrap();
+    let cfg = SimConfig {
+        actuator_mode: ActuatorMode::ExplicitTorque,
+        solver_iterations: 2,
+        ..SimConfig::default()
+    };
+    let (s, h) = stand(spec, spec.stand_gains, 1.0, cfg);
+    println!("explicit torque: {:.3} m vs {:.3} m", s.base_pos[2], h);
+    assert!((s.base_pos[2] - h).abs() / h < 0.05);
+}
