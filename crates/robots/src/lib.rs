@@ -14,3 +14,4 @@ pub mod sim;
 pub mod task;
 pub mod terrain;
 pub mod urdf;
+pub mod vecenv;

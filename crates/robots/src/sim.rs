@@ -247,7 +247,21 @@ impl SimWorld {
         self.ground.push(h);
     }
 
-    /// Adds a heightfield ground: `heights[ix * ny + iy]` is the height (m) at
+    /// Adds a prebuilt ground shape (e.g. one heightfield shared by every worker's world) at `pose`.
+    pub fn add_ground_shape(&mut self, shape: SharedShape, pose: Pose) {
+        let body = self.world.insert_body(RigidBodyBuilder::fixed().pose(pose));
+        let c = ColliderBuilder::new(shape)
+            .friction(self.cfg.ground_friction)
+            .friction_combine_rule(CoefficientCombineRule::Multiply)
+            .collision_groups(ground_groups());
+        let h = self
+            .world
+            .colliders
+            .insert_with_parent(c.build(), body, &mut self.world.bodies);
+        self.ground.push(h);
+    }
+
+    /// Adds a heightfield ground: `heights[iy * nx + ix]` is the height (m) at
     /// `(origin_x + ix·cell, origin_y + iy·cell)`, `nx × ny` samples.
     pub fn add_heightfield_ground(
         &mut self,
@@ -266,7 +280,7 @@ impl SimWorld {
         let mut m = rapier3d::parry::utils::Array2::zeros(ny, nx);
         for ix in 0..nx {
             for iy in 0..ny {
-                m[(ny - 1 - iy, ix)] = heights[ix * ny + iy];
+                m[(ny - 1 - iy, ix)] = heights[iy * nx + ix];
             }
         }
         let sx = (nx - 1) as f32 * cell;

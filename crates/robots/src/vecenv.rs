@@ -1,0 +1,639 @@
+//! The vectorised environment: [`VecEnv`] runs `N` envs of one robot split over `T` workers (one
+//! rapier [`SimWorld`] per worker, stepped in parallel on a rayon pool), with the task's
+//! observations, rewards, terminations, commands and terrain curriculum.
+//!
+//! Step order (legged_gym / IsaacLab): actions → `decimation` physics steps → rewards and
+//! terminations → curriculum update and reset of finished envs → commands → pushes →
+//! observations (of the new episode for reset envs). Buffers are preallocated; a step allocates
+//! nothing. An env whose state goes non-finite or explodes (or whose world panics) is reset and
+//! counted in [`VecEnv::nan_resets`]; it never takes the process down.
+
+use std::panic::AssertUnwindSafe;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use rand::SeedableRng;
+use rand::rngs::SmallRng;
+use rapier3d::math::{Pose, Rot3, Vec3};
+use rayon::prelude::*;
+
+use crate::actuator::Actuator;
+use crate::catalog::{NUM_JOINTS, RobotSpec};
+use crate::config::{ConfigError, EnvConfig};
+use crate::model::RobotModel;
+use crate::sim::{RobotBinding, SimConfig, SimWorld};
+use crate::task::{
+    DoneReason, RobotState, RobotTaskParams, StepResult, Task, TaskEnvState, TaskError,
+};
+use crate::terrain::{Curriculum, Terrain, TerrainError, TerrainType};
+use crate::urdf::UrdfError;
+
+/// Errors building or stepping a [`VecEnv`].
+#[derive(Debug, thiserror::Error)]
+pub enum VecEnvError {
+    /// Bad config.
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    /// Terrain generation failed.
+    #[error(transparent)]
+    Terrain(#[from] TerrainError),
+    /// The robot model failed to load.
+    #[error(transparent)]
+    Urdf(#[from] UrdfError),
+    /// The task rejected the robot or an input.
+    #[error(transparent)]
+    Task(#[from] TaskError),
+    /// The simulator rejected the robot.
+    #[error(transparent)]
+    Sim(#[from] crate::sim::SimError),
+    /// Wrong action length.
+    #[error("actions: expected {expected} values ({num_envs} envs x {action_dim}), got {got}")]
+    ActionLength {
+        /// Expected length.
+        expected: usize,
+        /// Envs.
+        num_envs: usize,
+        /// Per env.
+        action_dim: usize,
+        /// Got.
+        got: usize,
+    },
+    /// Zero envs or threads.
+    #[error("num_envs and threads must be >= 1 (got {num_envs} envs, {threads} threads)")]
+    Size {
+        /// Envs.
+        num_envs: usize,
+        /// Threads.
+        threads: usize,
+    },
+    /// Thread pool creation failed.
+    #[error("cannot build the worker thread pool: {0}")]
+    Pool(String),
+}
+
+/// A finished episode.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EpisodeInfo {
+    /// Env index.
+    pub env: usize,
+    /// Undiscounted return.
+    pub ret: f32,
+    /// Length in control steps.
+    pub length: u32,
+    /// Terrain level the episode ran on.
+    pub terrain_level: usize,
+    /// Terrain type of its column.
+    pub terrain_type: TerrainType,
+    /// Mean xy velocity tracking error (m/s).
+    pub lin_vel_error: f32,
+    /// Mean yaw-rate tracking error (rad/s).
+    pub ang_vel_error: f32,
+    /// Why it ended.
+    pub reason: DoneReason,
+}
+
+/// Accumulated wall time per stage (summed over steps; per worker stages are averaged over
+/// workers).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StageTimings {
+    /// Physics substeps (incl. actuators and contact reading).
+    pub physics: Duration,
+    /// Observations (incl. height scan and noise), commands and pushes.
+    pub observations: Duration,
+    /// Rewards and terminations.
+    pub rewards: Duration,
+    /// Resets (curriculum, physics reset, task reset).
+    pub resets: Duration,
+    /// Whole `step` calls.
+    pub total: Duration,
+    /// Number of `step` calls.
+    pub steps: u64,
+}
+
+/// What [`VecEnv::step`] returns; slices borrow the env's buffers.
+#[derive(Debug)]
+pub struct StepOutput<'a> {
+    /// `[num_envs * obs_dim]`, reset envs show their new episode's first observation.
+    pub obs: &'a [f32],
+    /// `[num_envs]`.
+    pub rewards: &'a [f32],
+    /// `[num_envs]`: episode ended by failure (no bootstrap).
+    pub terminated: &'a [bool],
+    /// `[num_envs]`: episode ended by time-out (bootstrap with V(s_t)).
+    pub truncated: &'a [bool],
+    /// Episodes that finished in this step.
+    pub episodes: &'a [EpisodeInfo],
+}
+
+struct Worker {
+    sim: SimWorld,
+    first_env: usize,
+    n: usize,
+    envs: Vec<TaskEnvState>,
+    states: Vec<RobotState>,
+    actions: Vec<[f32; NUM_JOINTS]>,
+    targets: Vec<[f32; NUM_JOINTS]>,
+    results: Vec<StepResult>,
+    origins: Vec<[f32; 3]>,
+    obs: Vec<f32>,
+    rng: SmallRng,
+    nan_resets: u64,
+    t_physics: Duration,
+    t_obs: Duration,
+    t_rewards: Duration,
+    t_resets: Duration,
+}
+
+/// Shared read-only pieces every worker needs.
+struct Shared {
+    task: Task,
+    terrain: Terrain,
+    model: RobotModel,
+    binding: RobotBinding,
+    actuator: Actuator,
+    sim_cfg: SimConfig,
+    decimation: usize,
+    spawn_clearance: f32,
+    default_pose: [f32; NUM_JOINTS],
+    ground: Option<rapier3d::prelude::SharedShape>,
+}
+
+/// N envs of one robot, stepped in parallel.
+pub struct VecEnv {
+    shared: Arc<Shared>,
+    workers: Vec<Worker>,
+    pool: rayon::ThreadPool,
+    curriculum: Curriculum,
+    num_envs: usize,
+    obs_dim: usize,
+    obs: Vec<f32>,
+    rewards: Vec<f32>,
+    terminated: Vec<bool>,
+    truncated: Vec<bool>,
+    episodes: Vec<EpisodeInfo>,
+    timings: StageTimings,
+    rng: SmallRng,
+}
+
+impl std::fmt::Debug for VecEnv {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("VecEnv")
+            .field("num_envs", &self.num_envs)
+            .field("workers", &self.workers.len())
+            .finish()
+    }
+}
+
+/// Speed (m/s) or joint speed (rad/s) above which an env counts as exploded.
+const EXPLODED_LIN_VEL: f32 = 50.0;
+const EXPLODED_JOINT_VEL: f32 = 500.0;
+
+fn exploded(s: &RobotState) -> bool {
+    !s.is_finite()
+        || s.base_lin_vel_w.iter().any(|v| v.abs() > EXPLODED_LIN_VEL)
+        || s.base_ang_vel_w
+            .iter()
+            .any(|v| v.abs() > 4.0 * EXPLODED_LIN_VEL)
+        || s.joint_vel.iter().any(|v| v.abs() > EXPLODED_JOINT_VEL)
+        || s.base_pos[2].abs() > 1e3
+}
+
+fn build_world(shared: &Shared, n: usize, origins: &[[f32; 3]]) -> Result<SimWorld, VecEnvError> {
+    let mut sim = SimWorld::new(shared.sim_cfg);
+    match &shared.ground {
+        Some(shape) => sim.add_ground_shape(shape.clone(), ground_pose(&shared.terrain)),
+        None => sim.add_flat_ground(0.0),
+    }
+    for o in origins.iter().take(n) {
+        let pose = Pose::from_translation(Vec3::new(o[0], o[1], o[2] + shared.spawn_clearance));
+        sim.add_robot(
+            &shared.model,
+            &shared.binding,
+            shared.actuator,
+            pose,
+            &shared.default_pose,
+        )?;
+    }
+    Ok(sim)
+}
+
+fn ground_pose(t: &Terrain) -> Pose {
+    let sx = (t.nx.max(2) - 1) as f32 * t.resolution;
+    let sy = (t.ny.max(2) - 1) as f32 * t.resolution;
+    Pose::from_parts(
+        Vec3::new(t.x0 + 0.5 * sx, t.y0 + 0.5 * sy, 0.0),
+        Rot3::from_rotation_x(std::f32::consts::FRAC_PI_2),
+    )
+}
+
+impl VecEnv {
+    /// Builds `num_envs` envs of `spec` with `cfg`, split over `threads` workers, seeded with `seed`.
+    pub fn new(
+        spec: &RobotSpec,
+        cfg: &EnvConfig,
+        num_envs: usize,
+        threads: usize,
+        seed: u64,
+    ) -> Result<Self, VecEnvError> {
+        if num_envs == 0 || threads == 0 {
+            return Err(VecEnvError::Size { num_envs, threads });
+        }
+        let task_spec = cfg.resolve(spec.name)?;
+        let model = spec.model()?;
+        let mut limits = [[-std::f32::consts::PI, std::f32::consts::PI]; NUM_JOINTS];
+        for (k, name) in spec.joint_names.iter().enumerate() {
+            if let Some(b) = model.body_of_joint(name)
+                && let Some((lo, hi)) = model.bodies[b].joint.as_ref().and_then(|j| j.limits)
+            {
+                limits[k] = [lo, hi];
+            }
+        }
+        let params = RobotTaskParams {
+            name: spec.name.to_string(),
+            default_joint_pos: spec.default_pose,
+            joint_pos_limits: limits,
+            soft_limit_factor: if spec.family == crate::catalog::Family::Anymal {
+                0.95
+            } else {
+                0.9
+            },
+            action_scale: spec.action_scale,
+            num_penalised_bodies: spec
+                .penalised_links
+                .len()
+                .min(crate::task::MAX_PENALISED_BODIES),
+        };
+        let decimation = task_spec.decimation as usize;
+        let sim_cfg = SimConfig {
+            dt: task_spec.sim_dt,
+            ..SimConfig::default()
+        };
+        let terrain = Terrain::generate(&task_spec.terrain)?;
+        let task = Task::new(task_spec, params)?;
+        let ground = (!terrain.is_flat()).then(|| terrain_shape(&terrain));
+        let standing = model.standing_height(&spec.model_order_pose(&model, &spec.default_pose));
+        let mut rng = SmallRng::seed_from_u64(seed);
+        let curriculum = Curriculum::new(num_envs, &task.spec.terrain, &mut rng);
+        let shared = Arc::new(Shared {
+            task,
+            terrain,
+            model,
+            binding: RobotBinding::from_spec(spec),
+            actuator: Actuator::from_spec(spec, spec.training_gains),
+            sim_cfg,
+            decimation,
+            spawn_clearance: standing + 0.05,
+            default_pose: spec.default_pose,
+            ground,
+        });
+        let threads = threads.min(num_envs);
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .map_err(|e| VecEnvError::Pool(e.to_string()))?;
+        let obs_dim = shared.task.obs_dim();
+        let mut workers = Vec::with_capacity(threads);
+        let mut first = 0;
+        for w in 0..threads {
+            let n = num_envs / threads + usize::from(w < num_envs % threads);
+            let origins: Vec<[f32; 3]> = (first..first + n)
+                .map(|e| {
+                    shared
+                        .terrain
+                        .tile_origin(curriculum.level(e), curriculum.col(e))
+                })
+                .collect();
+            let sim = build_world(&shared, n, &origins)?;
+            workers.push(Worker {
+                sim,
+                first_env: first,
+                n,
+                envs: vec![TaskEnvState::new(); n],
+                states: vec![RobotState::default(); n],
+                actions: vec![[0.0; NUM_JOINTS]; n],
+                targets: vec![spec.default_pose; n],
+                results: vec![StepResult::default(); n],
+                origins,
+                obs: vec![0.0; n * obs_dim],
+                rng: SmallRng::seed_from_u64(
+                    seed.wrapping_add(1 + w as u64)
+                        .wrapping_mul(0x9E37_79B9_7F4A_7C15),
+                ),
+                nan_resets: 0,
+                t_physics: Duration::ZERO,
+                t_obs: Duration::ZERO,
+                t_rewards: Duration::ZERO,
+                t_resets: Duration::ZERO,
+            });
+            first += n;
+        }
+        for w in &mut workers {
+            for i in 0..w.n {
+                let r = shared.task.sample_body_randomization(&mut w.rng);
+                w.sim.set_friction(i, r.static_friction);
+                if r.added_base_mass != 0.0 {
+                    w.sim.set_added_base_mass(i, r.added_base_mass);
+                }
+            }
+        }
+        Ok(Self {
+            shared,
+            workers,
+            pool,
+            curriculum,
+            num_envs,
+            obs_dim,
+            obs: vec![0.0; num_envs * obs_dim],
+            rewards: vec![0.0; num_envs],
+            terminated: vec![false; num_envs],
+            truncated: vec![false; num_envs],
+            episodes: Vec::with_capacity(num_envs),
+            timings: StageTimings::default(),
+            rng,
+        })
+    }
+
+    /// Number of envs.
+    pub fn num_envs(&self) -> usize {
+        self.num_envs
+    }
+
+    /// Observation size per env (48, or 235 with the height scan).
+    pub fn obs_dim(&self) -> usize {
+        self.obs_dim
+    }
+
+    /// Action size per env (12).
+    pub fn action_dim(&self) -> usize {
+        NUM_JOINTS
+    }
+
+    /// The task (config, reward weights, dt).
+    pub fn task(&self) -> &Task {
+        &self.shared.task
+    }
+
+    /// The terrain.
+    pub fn terrain(&self) -> &Terrain {
+        &self.shared.terrain
+    }
+
+    /// The curriculum (levels per env, mean level, per-type means).
+    pub fn curriculum(&self) -> &Curriculum {
+        &self.curriculum
+    }
+
+    /// Envs reset because their physics went non-finite or exploded.
+    pub fn nan_resets(&self) -> u64 {
+        self.workers.iter().map(|w| w.nan_resets).sum()
+    }
+
+    /// Accumulated stage timings since construction or [`Self::reset_timings`].
+    pub fn timings(&self) -> StageTimings {
+        self.timings
+    }
+
+    /// Clears the stage timings.
+    pub fn reset_timings(&mut self) {
+        self.timings = StageTimings::default();
+        for w in &mut self.workers {
+            w.t_physics = Duration::ZERO;
+            w.t_obs = Duration::ZERO;
+            w.t_rewards = Duration::ZERO;
+            w.t_resets = Duration::ZERO;
+        }
+    }
+
+    /// Latest robot state of env `e` (after the last step or reset).
+    pub fn robot_state(&self, e: usize) -> Option<&RobotState> {
+        self.workers
+            .iter()
+            .find(|w| e >= w.first_env && e < w.first_env + w.n)
+            .map(|w| &w.states[e - w.first_env])
+    }
+
+    /// Resets every env and returns the first observations `[num_envs * obs_dim]`.
+    pub fn reset_all(&mut self) -> &[f32] {
+        let shared = &self.shared;
+        let curriculum = &self.curriculum;
+        self.pool.install(|| {
+            self.workers.par_iter_mut().for_each(|w| {
+                for i in 0..w.n {
+                    let e = w.first_env + i;
+                    w.origins[i] = shared
+                        .terrain
+                        .tile_origin(curriculum.level(e), curriculum.col(e));
+                    reset_one(shared, w, i);
+                }
+                observe_all(shared, w);
+            })
+        });
+        self.gather();
+        &self.obs
+    }
+
+    /// Steps every env once with `actions` (`[num_envs * 12]`, raw policy outputs).
+    pub fn step(&mut self, actions: &[f32]) -> Result<StepOutput<'_>, VecEnvError> {
+        if actions.len() != self.num_envs * NUM_JOINTS {
+            return Err(VecEnvError::ActionLength {
+                expected: self.num_envs * NUM_JOINTS,
+                num_envs: self.num_envs,
+                action_dim: NUM_JOINTS,
+                got: actions.len(),
+            });
+        }
+        let t0 = Instant::now();
+        let shared = &self.shared;
+        // Phase A: actions, physics, rewards.
+        self.pool.install(|| {
+            self.workers.par_iter_mut().for_each(|w| {
+                let a = &actions[w.first_env * NUM_JOINTS..(w.first_env + w.n) * NUM_JOINTS];
+                physics_and_rewards(shared, w, a);
+            })
+        });
+        // Phase B (serial, cheap): episode statistics and curriculum.
+        let tb = Instant::now();
+        self.episodes.clear();
+        for w in &mut self.workers {
+            for i in 0..w.n {
+                let e = w.first_env + i;
+                let r = w.results[i];
+                self.rewards[e] = r.reward;
+                self.terminated[e] = r.terminated;
+                self.truncated[e] = r.truncated && !r.terminated;
+                if r.terminated || r.truncated {
+                    let s = shared.task.finish_episode(&w.envs[i], &w.states[i]);
+                    let level = self.curriculum.level(e);
+                    let col = self.curriculum.col(e);
+                    self.episodes.push(EpisodeInfo {
+                        env: e,
+                        ret: s.ret,
+                        length: s.length,
+                        terrain_level: level,
+                        terrain_type: shared.terrain.tile_type(col),
+                        lin_vel_error: s.mean_lin_vel_error,
+                        ang_vel_error: s.mean_ang_vel_error,
+                        reason: s.reason,
+                    });
+                    self.curriculum.update(
+                        e,
+                        s.distance,
+                        s.command_xy_norm,
+                        shared.task.spec.episode_length_s,
+                        &mut self.rng,
+                    );
+                    w.origins[i] = shared.terrain.tile_origin(self.curriculum.level(e), col);
+                }
+            }
+        }
+        let serial = tb.elapsed();
+        // Phase C: resets, commands, pushes, observations.
+        self.pool.install(|| {
+            self.workers.par_iter_mut().for_each(|w| {
+                let t = Instant::now();
+                for i in 0..w.n {
+                    if w.results[i].terminated || w.results[i].truncated {
+                        reset_one(shared, w, i);
+                    }
+                }
+                w.t_resets += t.elapsed();
+                let t = Instant::now();
+                observe_all(shared, w);
+                w.t_obs += t.elapsed();
+            })
+        });
+        self.gather();
+        let k = self.workers.len() as u32;
+        let sum = |f: fn(&Worker) -> Duration| self.workers.iter().map(f).sum::<Duration>() / k;
+        self.timings.physics = sum(|w| w.t_physics);
+        self.timings.rewards = sum(|w| w.t_rewards);
+        self.timings.observations = sum(|w| w.t_obs);
+        self.timings.resets = sum(|w| w.t_resets) + serial;
+        self.timings.total += t0.elapsed();
+        self.timings.steps += 1;
+        Ok(StepOutput {
+            obs: &self.obs,
+            rewards: &self.rewards,
+            terminated: &self.terminated,
+            truncated: &self.truncated,
+            episodes: &self.episodes,
+        })
+    }
+
+    fn gather(&mut self) {
+        let d = self.obs_dim;
+        for w in &self.workers {
+            self.obs[w.first_env * d..(w.first_env + w.n) * d].copy_from_slice(&w.obs);
+        }
+    }
+}
+
+fn terrain_shape(t: &Terrain) -> rapier3d::prelude::SharedShape {
+    let (nx, ny) = (t.nx, t.ny);
+    let mut m = rapier3d::parry::utils::Array2::zeros(ny, nx);
+    for iy in 0..ny {
+        for ix in 0..nx {
+            m[(ny - 1 - iy, ix)] = t.heights[iy * nx + ix];
+        }
+    }
+    let sx = (nx - 1) as f32 * t.resolution;
+    let sy = (ny - 1) as f32 * t.resolution;
+    rapier3d::prelude::SharedShape::heightfield(m, Vec3::new(sx, 1.0, sy))
+}
+
+fn physics_and_rewards(shared: &Shared, w: &mut Worker, actions: &[f32]) {
+    let t = Instant::now();
+    for i in 0..w.n {
+        let raw = &actions[i * NUM_JOINTS..(i + 1) * NUM_JOINTS];
+        // Length is checked by the caller; a bad length can only come from a bug.
+        let _ = shared
+            .task
+            .process_action(raw, &mut w.actions[i], &mut w.targets[i]);
+        w.sim.set_targets(i, &w.targets[i]);
+    }
+    w.sim.clear_contact_maxima();
+    let sim = &mut w.sim;
+    let decimation = shared.decimation;
+    let ok = std::panic::catch_unwind(AssertUnwindSafe(|| {
+        for _ in 0..decimation {
+            sim.step();
+        }
+    }))
+    .is_ok();
+    if !ok {
+        // The world is in an unknown state: rebuild it and fail every env in it.
+        tracing::warn!(
+            first_env = w.first_env,
+            "physics panicked; rebuilding the worker's world"
+        );
+        if let Ok(sim) = build_world(shared, w.n, &w.origins) {
+            w.sim = sim;
+        }
+    }
+    for i in 0..w.n {
+        w.sim.read_state(i, &mut w.states[i]);
+        if !ok || exploded(&w.states[i]) {
+            w.states[i].base_pos[2] = f32::NAN;
+        }
+    }
+    w.t_physics += t.elapsed();
+    let t = Instant::now();
+    for i in 0..w.n {
+        w.results[i] =
+            shared
+                .task
+                .evaluate(&mut w.envs[i], &w.states[i], &w.actions[i], &shared.terrain);
+        if w.results[i].reason == DoneReason::NonFinite {
+            w.nan_resets += 1;
+        }
+    }
+    w.t_rewards += t.elapsed();
+}
+
+fn reset_one(shared: &Shared, w: &mut Worker, i: usize) {
+    let s = shared
+        .task
+        .sample_reset(w.origins[i], &shared.terrain, &mut w.rng);
+    let pos = Vec3::new(
+        s.base_xy[0],
+        s.base_xy[1],
+        s.ground_z + shared.spawn_clearance,
+    );
+    let pose = Pose::from_parts(pos, Rot3::from_rotation_z(s.yaw));
+    w.sim.reset_robot(
+        i,
+        pose,
+        Vec3::from(s.lin_vel),
+        Vec3::from(s.ang_vel),
+        &s.joint_pos,
+        &s.joint_vel,
+    );
+    w.targets[i] = s.joint_pos;
+    w.sim.read_state(i, &mut w.states[i]);
+    let origin = w.origins[i];
+    shared
+        .task
+        .reset_env(&mut w.envs[i], &w.states[i], origin, &mut w.rng);
+}
+
+fn observe_all(shared: &Shared, w: &mut Worker) {
+    let d = shared.task.obs_dim();
+    for i in 0..w.n {
+        shared
+            .task
+            .update_commands(&mut w.envs[i], &w.states[i], &mut w.rng);
+        if let Some([vx, vy]) = shared.task.push_due(&mut w.envs[i], &mut w.rng) {
+            w.sim.push_base(i, vx, vy);
+            w.states[i].base_lin_vel_w[0] = vx;
+            w.states[i].base_lin_vel_w[1] = vy;
+        }
+        let out = &mut w.obs[i * d..(i + 1) * d];
+        if shared
+            .task
+            .observe(&w.envs[i], &w.states[i], &shared.terrain, &mut w.rng, out)
+            .is_err()
+        {
+            out.fill(0.0);
+        }
+    }
+}

@@ -1,0 +1,72 @@
+//! The vectorised env: shapes, determinism-free sanity, resets, NaN actions, rough terrain.
+
+use l3p_robots::catalog::RobotSpec;
+use l3p_robots::config::{EnvConfig, TerrainPreset};
+use l3p_robots::vecenv::VecEnv;
+
+fn cfg(preset: TerrainPreset) -> EnvConfig {
+    EnvConfig {
+        terrain: l3p_robots::config::TerrainConfig::with_preset(preset),
+        height_scan: preset != TerrainPreset::Flat,
+        ..Default::default()
+    }
+}
+
+#[test]
+fn flat_env_steps_with_zero_actions_and_robots_stand() {
+    let spec = RobotSpec::by_name("a1").unwrap();
+    let mut env = VecEnv::new(spec, &cfg(TerrainPreset::Flat), 8, 2, 1).unwrap();
+    assert_eq!(env.obs_dim(), 48);
+    assert_eq!(env.action_dim(), 12);
+    let obs = env.reset_all().to_vec();
+    assert_eq!(obs.len(), 8 * 48);
+    assert!(obs.iter().all(|v| v.is_finite()));
+    let actions = vec![0.0; 8 * 12];
+    let mut terminated = 0;
+    for _ in 0..100 {
+        let out = env.step(&actions).unwrap();
+        assert_eq!(out.rewards.len(), 8);
+        assert!(out.obs.iter().all(|v| v.is_finite()));
+        assert!(out.rewards.iter().all(|v| v.is_finite()));
+        terminated += out.terminated.iter().filter(|t| **t).count();
+    }
+    // Holding the default pose on flat ground nobody falls.
+    assert_eq!(terminated, 0);
+    for e in 0..8 {
+        let s = env.robot_state(e).unwrap();
+        assert!(s.base_pos[2] > 0.2, "env {e} sank to {}", s.base_pos[2]);
+    }
+    assert_eq!(env.nan_resets(), 0);
+    assert!(
+        env.step(&actions[..5]).is_err(),
+        "wrong action length must be an error"
+    );
+}
+
+#[test]
+fn rough_env_with_random_and_nan_actions_never_panics() {
+    let spec = RobotSpec::by_name("a1").unwrap();
+    let mut env = VecEnv::new(spec, &cfg(TerrainPreset::Curriculum), 6, 2, 7).unwrap();
+    assert_eq!(env.obs_dim(), 235);
+    env.reset_all();
+    let mut x: u32 = 12345;
+    let mut actions = vec![0.0f32; 6 * 12];
+    let mut episodes = 0;
+    for step in 0..300 {
+        for a in actions.iter_mut() {
+            x = x.wrapping_mul(1664525).wrapping_add(1013904223);
+            *a = (x >> 8) as f32 / (1u32 << 24) as f32 * 4.0 - 2.0;
+        }
+        if step % 50 == 0 {
+            actions[3] = f32::NAN;
+        }
+        let out = env.step(&actions).unwrap();
+        assert!(out.obs.iter().all(|v| v.is_finite()));
+        episodes += out.episodes.len();
+    }
+    // Random actions make robots fall: episodes end and are reported.
+    assert!(episodes > 0);
+    let t = env.timings();
+    assert_eq!(t.steps, 300);
+    assert!(t.physics > t.rewards);
+}
