@@ -3,4 +3,6 @@
 //! modules only parse and glue; the work lives in the library crates.
 
 pub mod config;
+pub mod bench_cmd;
 pub mod config_cmd;
+pub mod robots_cmd;

@@ -15,6 +15,10 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// List the built-in robots or check a robot / URDF file (load, stand under PD).
+    Robots(l3p_cli::robots_cmd::RobotsArgs),
+    /// Benchmarks (`bench sim`: simulator throughput).
+    Bench(l3p_cli::bench_cmd::BenchArgs),
     /// Check a TOML config file: parse it strictly and print the resolved values.
     Config(l3p_cli::config_cmd::ConfigArgs),
 }
@@ -24,5 +28,7 @@ fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Config(args) => l3p_cli::config_cmd::run(args),
+        Command::Robots(args) => l3p_cli::robots_cmd::run(args),
+        Command::Bench(args) => l3p_cli::bench_cmd::run(args),
     }
 }

@@ -7,6 +7,7 @@
 //! Architecture invariant: this crate knows nothing of burn, Zenoh or tokio.
 
 pub mod actuator;
+pub mod bench;
 pub mod catalog;
 pub mod config;
 pub mod model;
