@@ -161,3 +161,27 @@ fn explicit_torque_mode_also_stands() {
     println!("explicit torque: {:.3} m vs {:.3} m", s.base_pos[2], h);
     assert!((s.base_pos[2] - h).abs() / h < 0.05);
 }
+
+#[test]
+fn heightfield_ground_is_z_up_with_rows_along_y() {
+    // h(x, y) = 0.3 for x > 0.5, plus 0.1 for y > 0.3, on a grid from (-2, -1) with 0.1 m cells.
+    let (nx, ny, cell, x0, y0) = (41usize, 21usize, 0.1f32, -2.0f32, -1.0f32);
+    let mut heights = vec![0.0; nx * ny];
+    for iy in 0..ny {
+        for ix in 0..nx {
+            let (x, y) = (x0 + ix as f32 * cell, y0 + iy as f32 * cell);
+            heights[iy * nx + ix] = if x > 0.5 { 0.3 } else { 0.0 } + if y > 0.3 { 0.1 } else { 0.0 };
+        }
+    }
+    let mut w = SimWorld::new(SimConfig::default());
+    w.add_heightfield_ground(&heights, nx, ny, cell, [x0, y0]);
+    let cases = [(1.2, -0.6, 0.3), (-1.2, 0.7, 0.1), (1.2, 0.7, 0.4), (-1.2, -0.6, 0.0)];
+    let balls: Vec<_> = cases.iter().map(|&(x, y, _)| w.add_free_ball(Vec3::new(x, y, 1.0), 0.05, 1.0)).collect();
+    for _ in 0..400 {
+        w.step();
+    }
+    for (b, &(x, y, h)) in balls.iter().zip(&cases) {
+        let (p, _) = w.body_state(*b).unwrap();
+        assert!((p.z - (h + 0.05)).abs() < 0.01, "ball at ({x}, {y}) rests at {} instead of {}", p.z, h + 0.05);
+    }
+}
