@@ -23,6 +23,7 @@ pub mod bench;
 pub mod daemon;
 pub mod gae;
 pub mod ppo;
+pub mod report;
 pub mod storage;
 
 pub use gae::{compute_gae, explained_variance, normalize};

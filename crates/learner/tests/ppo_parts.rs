@@ -1,0 +1,408 @@
+//! PPO pieces against hand-computed values, the adaptive learning rate, global-norm clipping,
+//! transfer freezing, checkpoints and bad input.
+
+mod common;
+
+use burn::tensor::{Tensor, TensorData};
+use common::*;
+use l3p_learner::ppo::{approx_kl, surrogate_loss, value_loss};
+use l3p_learner::*;
+use l3p_policy::{
+    PolicyConfig, RecoveryConfig, RobotSpec, core_sha256, cpu_device, tensor_to_vec, train_device,
+};
+use rand::SeedableRng;
+use rand::rngs::StdRng;
+
+fn t1(v: &[f32]) -> Tensor<1> {
+    Tensor::from_data(TensorData::new(v.to_vec(), [v.len()]), &cpu_device())
+}
+
+fn small_config() -> PolicyConfig {
+    PolicyConfig {
+        d_h: 8,
+        d_z: 4,
+        encoder_hidden: vec![32],
+        core_hidden: vec![32],
+        decoder_hidden: vec![16],
+        mlp_hidden: vec![32, 32],
+        critic_hidden: vec![32],
+        recovery: RecoveryConfig {
+            diffusion_steps: 5,
+            obs_hidden: vec![32],
+            act_hidden: vec![16],
+            eval_samples: 16,
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
+#[test]
+fn losses_match_hand_computation() {
+    // ratios 1.5 (A=1 → clipped: −1.2), 0.5 (A=1 → −0.5 wins), 0.5 (A=−2 → max(1.0, 1.6) = 1.6)
+    let s = tensor_to_vec(surrogate_loss(
+        t1(&[1.5, 0.5, 0.5]),
+        t1(&[1.0, 1.0, -2.0]),
+        0.2,
+    ))
+    .unwrap()[0];
+    assert!((s - (-1.2 - 0.5 + 1.6) / 3.0).abs() < 1e-6, "{s}");
+    // V = 1, V_old = 0, R = 2: unclipped (1−2)² = 1, clipped V_c = 0.2 → (0.2−2)² = 3.24 → max 3.24
+    // V = 0.1, V_old = 0, R = 0: (0.1)² = 0.01 both → 0.01
+    let v = tensor_to_vec(value_loss(
+        t1(&[1.0, 0.1]),
+        t1(&[0.0, 0.0]),
+        t1(&[2.0, 0.0]),
+        0.2,
+        true,
+    ))
+    .unwrap()[0];
+    assert!((v - (3.24 + 0.01) / 2.0).abs() < 1e-6, "{v}");
+    let v = tensor_to_vec(value_loss(
+        t1(&[1.0, 0.1]),
+        t1(&[0.0, 0.0]),
+        t1(&[2.0, 0.0]),
+        0.2,
+        false,
+    ))
+    .unwrap()[0];
+    assert!((v - (1.0 + 0.01) / 2.0).abs() < 1e-6, "{v}");
+    // KL: σ = 2, σ_old = 1, μ − μ_old = 1 (one dim): ln(2 + 1e-5) + (1 + 1)/(2·4) − 0.5 = 0.443152
+    let d = cpu_device();
+    let m = |v: f32| Tensor::<2>::from_data(TensorData::new(vec![v], [1, 1]), &d);
+    let kl = tensor_to_vec(approx_kl(m(1.0), t1(&[2.0]), m(0.0), m(1.0))).unwrap()[0];
+    assert!(
+        (kl - ((2.0f32 + 1e-5).ln() + 0.25 - 0.5)).abs() < 1e-6,
+        "{kl}"
+    );
+    // Identical policies: KL ≈ 0 (up to the 1e-5 inside the log).
+    let kl = tensor_to_vec(approx_kl(m(0.3), t1(&[0.7]), m(0.3), m(0.7))).unwrap()[0];
+    assert!(kl.abs() < 2e-5, "{kl}");
+}
+
+#[test]
+fn adaptive_learning_rate_moves_as_rsl_rl() {
+    let cfg = PpoConfig::default();
+    assert!((cfg.adapt_lr(1e-3, 0.05) - 1e-3 / 1.5).abs() < 1e-12); // kl > 2·0.01
+    assert!((cfg.adapt_lr(1e-3, 0.001) - 1.5e-3).abs() < 1e-12); // 0 < kl < 0.005
+    assert_eq!(cfg.adapt_lr(1e-3, 0.01), 1e-3); // inside the band
+    assert_eq!(cfg.adapt_lr(1e-3, 0.0), 1e-3); // kl = 0: no change
+    assert_eq!(cfg.adapt_lr(1.2e-5, 1.0), 1e-5); // floor
+    assert_eq!(cfg.adapt_lr(9e-3, 0.0001), 1e-2); // cap
+    let fixed = PpoConfig {
+        schedule: Schedule::Fixed,
+        ..Default::default()
+    };
+    assert_eq!(fixed.adapt_lr(1e-3, 1.0), 1e-3);
+}
+
+#[test]
+fn global_norm_clipping_scales_all_gradients_jointly() {
+    use burn::module::Module;
+    use burn::optim::GradientsParams;
+    let d = train_device();
+    let net = l3p_policy::MlpConfig::new(3, &[4], 2).init(&d);
+    let x = Tensor::<2>::from_data(TensorData::new(vec![10.0f32; 6], [2, 3]), &d);
+    let loss = net.forward(x).sum().mul_scalar(100.0);
+    let mut grads = GradientsParams::from_grads(loss.backward(), &net);
+    let ids = param_ids(&net);
+    let norm_of = |g: &GradientsParams| -> f32 {
+        let mut s = 0f32;
+        for layer in &net.layers {
+            s += tensor_to_vec(g.get::<2>(layer.weight.id).unwrap())
+                .unwrap()
+                .iter()
+                .map(|v| v * v)
+                .sum::<f32>();
+            s += tensor_to_vec(g.get::<1>(layer.bias.as_ref().unwrap().id).unwrap())
+                .unwrap()
+                .iter()
+                .map(|v| v * v)
+                .sum::<f32>();
+        }
+        s.sqrt()
+    };
+    assert_eq!(ids.len(), 4);
+    let before = norm_of(&grads);
+    let reported = clip_global_grad_norm(&net, &mut grads, 1.0).unwrap();
+    assert!((reported - before).abs() / before < 1e-4);
+    assert!(before > 10.0);
+    assert!(
+        (norm_of(&grads) - 1.0).abs() < 1e-3,
+        "clipped norm {}",
+        norm_of(&grads)
+    );
+    let _ = net.num_params();
+}
+
+fn head_bytes(model: &l3p_policy::PolicyModel) -> Vec<f32> {
+    let h = &model.net.robots[0];
+    let mut v = Vec::new();
+    for l in h
+        .encoder
+        .to_host()
+        .into_iter()
+        .chain(h.decoder.as_ref().unwrap().to_host())
+    {
+        v.extend(l.0);
+        v.extend(l.1);
+    }
+    v
+}
+
+#[test]
+fn l3p_transfer_keeps_the_core_bit_identical_and_trains_adapters() {
+    let device = train_device();
+    // "Pretrain" on one robot, save, transfer to another robot with a frozen core.
+    let src = init_model(
+        Mode::L3p,
+        small_config(),
+        vec![RobotSpec::new("a1", OBS, ACT)],
+        None,
+        &device,
+    )
+    .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("a1.ckpt");
+    Ppo::new(
+        PpoConfig {
+            mode: Mode::L3p,
+            ..Default::default()
+        },
+        src,
+        device.clone(),
+    )
+    .unwrap()
+    .save(&path)
+    .unwrap();
+    let model = init_model(
+        Mode::L3pTransfer,
+        small_config(),
+        vec![RobotSpec::new("pm", OBS, ACT)],
+        Some(&path),
+        &device,
+    )
+    .unwrap();
+    let core_before = core_sha256(&model.net).unwrap();
+    let ck_core = core_sha256(
+        &l3p_policy::load_checkpoint(&path, &device)
+            .unwrap()
+            .model
+            .net,
+    )
+    .unwrap();
+    assert_eq!(
+        core_before, ck_core,
+        "the core is loaded from the checkpoint"
+    );
+    let heads_before = head_bytes(&model);
+    let mut ppo = Ppo::new(
+        PpoConfig {
+            mode: Mode::L3pTransfer,
+            ..Default::default()
+        },
+        model,
+        device,
+    )
+    .unwrap();
+    let mut env = PointMass::new(32, 1);
+    let mut rng = StdRng::seed_from_u64(2);
+    for _ in 0..3 {
+        let batch = collect(ppo.model(), &mut env, 8, &mut rng);
+        ppo.update(&batch).unwrap();
+    }
+    assert_eq!(
+        core_sha256(&ppo.model().net).unwrap(),
+        core_before,
+        "frozen core changed"
+    );
+    assert_ne!(
+        head_bytes(ppo.model()),
+        heads_before,
+        "adapters did not train"
+    );
+    // Export carries the core hash, so an adapter can be matched to its core.
+    let (_, cfg) = ppo.export("pm").unwrap();
+    assert_eq!(cfg.core_sha256.unwrap(), core_before);
+}
+
+#[test]
+fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
+    let device = train_device();
+    let model = init_model(
+        Mode::L3p,
+        small_config(),
+        vec![RobotSpec::new("pm", OBS, ACT)],
+        None,
+        &device,
+    )
+    .unwrap();
+    let before = core_sha256(&model.net).unwrap();
+    let mut ppo = Ppo::new(
+        PpoConfig {
+            mode: Mode::L3p,
+            ..Default::default()
+        },
+        model,
+        device.clone(),
+    )
+    .unwrap();
+    let mut env = PointMass::new(32, 1);
+    let mut rng = StdRng::seed_from_u64(2);
+    let m = ppo
+        .update(&collect(ppo.model(), &mut env, 8, &mut rng))
+        .unwrap();
+    assert_ne!(core_sha256(&ppo.model().net).unwrap(), before);
+    assert!(m.rec_obs_loss > 0.0 && m.rec_act_loss > 0.0 && m.recon_mse.is_finite());
+
+    let mlp = init_model(
+        Mode::Mlp,
+        small_config(),
+        vec![RobotSpec::new("a1", OBS, ACT)],
+        None,
+        &device,
+    )
+    .unwrap();
+    let obs: Vec<f32> = (0..8).map(|i| i as f32 * 0.1).collect();
+    let want = mlp.act_mean_host(0, &obs).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("mlp.ckpt");
+    Ppo::new(
+        PpoConfig {
+            mode: Mode::Mlp,
+            ..Default::default()
+        },
+        mlp,
+        device.clone(),
+    )
+    .unwrap()
+    .save(&path)
+    .unwrap();
+    let go1 = init_model(
+        Mode::MlpTransfer,
+        small_config(),
+        vec![RobotSpec::new("go1", OBS, ACT)],
+        Some(&path),
+        &device,
+    )
+    .unwrap();
+    assert_eq!(go1.act_mean_host(0, &obs).unwrap(), want);
+    // Wrong combinations are errors with hints.
+    assert!(
+        init_model(
+            Mode::L3pTransfer,
+            small_config(),
+            vec![RobotSpec::new("go1", OBS, ACT)],
+            Some(&path),
+            &device
+        )
+        .is_err()
+    );
+    assert!(
+        init_model(
+            Mode::MlpTransfer,
+            small_config(),
+            vec![RobotSpec::new("go1", OBS, ACT)],
+            None,
+            &device
+        )
+        .unwrap_err()
+        .to_string()
+        .contains("hint")
+    );
+}
+
+#[test]
+fn checkpoint_resume_gives_identical_actions_and_state() {
+    let device = train_device();
+    let model = init_model(
+        Mode::L3p,
+        small_config(),
+        vec![RobotSpec::new("pm", OBS, ACT)],
+        None,
+        &device,
+    )
+    .unwrap();
+    let mut ppo = Ppo::new(
+        PpoConfig {
+            mode: Mode::L3p,
+            ..Default::default()
+        },
+        model,
+        device.clone(),
+    )
+    .unwrap();
+    let mut env = PointMass::new(32, 1);
+    let mut rng = StdRng::seed_from_u64(2);
+    ppo.update(&collect(ppo.model(), &mut env, 8, &mut rng))
+        .unwrap();
+    let bytes = ppo.checkpoint_bytes().unwrap();
+    let resumed = Ppo::from_checkpoint_bytes(
+        PpoConfig {
+            mode: Mode::L3p,
+            ..Default::default()
+        },
+        &bytes,
+        device,
+    )
+    .unwrap();
+    assert_eq!(resumed.iteration(), 1);
+    assert_eq!(resumed.learning_rate(), ppo.learning_rate());
+    let obs: Vec<f32> = (0..4 * OBS).map(|i| (i as f32).sin()).collect();
+    assert_eq!(
+        resumed.model().act_mean_host(0, &obs).unwrap(),
+        ppo.model().act_mean_host(0, &obs).unwrap()
+    );
+}
+
+#[test]
+fn bad_batches_are_errors_not_panics() {
+    let device = train_device();
+    let model = init_model(
+        Mode::Mlp,
+        small_config(),
+        vec![RobotSpec::new("pm", OBS, ACT)],
+        None,
+        &device,
+    )
+    .unwrap();
+    let mut ppo = Ppo::new(
+        PpoConfig {
+            mode: Mode::Mlp,
+            ..Default::default()
+        },
+        model,
+        device,
+    )
+    .unwrap();
+    let mut b = RolloutBatch {
+        robots: vec![RobotRollout::zeros("pm", 4, 4, OBS, ACT)],
+    };
+    b.robots[0].rewards[3] = f32::NAN;
+    assert!(
+        ppo.update(&b)
+            .unwrap_err()
+            .to_string()
+            .contains("rewards[3]")
+    );
+    let b = RolloutBatch {
+        robots: vec![RobotRollout::zeros("pm", 4, 4, OBS + 1, ACT)],
+    };
+    assert!(ppo.update(&b).unwrap_err().to_string().contains("obs"));
+    let b = RolloutBatch {
+        robots: vec![RobotRollout::zeros("spot", 4, 4, OBS, ACT)],
+    };
+    assert!(ppo.update(&b).unwrap_err().to_string().contains("spot"));
+    let mut b = RolloutBatch {
+        robots: vec![RobotRollout::zeros("pm", 4, 4, OBS, ACT)],
+    };
+    b.robots[0].actions.pop();
+    assert!(ppo.update(&b).is_err());
+    assert!(
+        "ppo"
+            .parse::<Mode>()
+            .unwrap_err()
+            .to_string()
+            .contains("hint")
+    );
+}
