@@ -17,6 +17,10 @@ use l3p_policy::{DeployPolicy, InferScratch};
 use l3p_proto::{
     EpisodeStats, MetricsRecord, PolicyAnnounce, RolloutChunk, WeightsBlob, codec, keys,
 };
+use l3p_robots::catalog::RobotSpec;
+use l3p_robots::config::EnvConfig;
+use l3p_robots::task::DoneReason;
+use l3p_robots::vecenv::VecEnv;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use sha2::{Digest, Sha256};
@@ -41,7 +45,75 @@ pub trait RolloutEnv: Send + 'static {
         terminated: &mut [bool],
         truncated: &mut [bool],
         episodes: &mut Vec<EpisodeStats>,
-    );
+    ) -> Result<(), ActorError>;
+}
+
+/// The rapier locomotion environment as a [`RolloutEnv`].
+pub struct SimEnv {
+    pub env: VecEnv,
+    obs: Vec<f32>,
+}
+
+impl SimEnv {
+    pub fn new(mut env: VecEnv) -> Self {
+        let obs = env.reset_all().to_vec();
+        Self { env, obs }
+    }
+}
+
+/// Build the simulated environment of an actor.
+pub fn sim_env(
+    robot: &RobotSpec,
+    config: &EnvConfig,
+    envs: usize,
+    threads: usize,
+    seed: u64,
+) -> Result<SimEnv, ActorError> {
+    let env = VecEnv::new(robot, config, envs, threads, seed)
+        .map_err(|e| ActorError::Env(e.to_string()))?;
+    Ok(SimEnv::new(env))
+}
+
+impl RolloutEnv for SimEnv {
+    fn num_envs(&self) -> usize {
+        self.env.num_envs()
+    }
+    fn obs_dim(&self) -> usize {
+        self.env.obs_dim()
+    }
+    fn action_dim(&self) -> usize {
+        self.env.action_dim()
+    }
+    fn observations(&self) -> &[f32] {
+        &self.obs
+    }
+    fn step(
+        &mut self,
+        actions: &[f32],
+        rewards: &mut [f32],
+        terminated: &mut [bool],
+        truncated: &mut [bool],
+        episodes: &mut Vec<EpisodeStats>,
+    ) -> Result<(), ActorError> {
+        let out = self
+            .env
+            .step(actions)
+            .map_err(|e| ActorError::Env(e.to_string()))?;
+        self.obs.copy_from_slice(out.obs);
+        rewards.copy_from_slice(out.rewards);
+        terminated.copy_from_slice(out.terminated);
+        truncated.copy_from_slice(out.truncated);
+        episodes.extend(out.episodes.iter().map(|e| EpisodeStats {
+            episode_return: e.ret,
+            length: e.length,
+            terrain_level: e.terrain_level as f32,
+            terrain_type: e.terrain_type.index() as u8,
+            lin_vel_error: e.lin_vel_error,
+            yaw_rate_error: e.ang_vel_error,
+            terminated: e.reason != DoneReason::TimeOut,
+        }));
+        Ok(())
+    }
 }
 
 /// Fills rollout chunks from an environment with a policy; buffers are reused between chunks.
@@ -105,7 +177,7 @@ impl<E: RolloutEnv> Collector<E> {
                 &mut chunk.terminated[rows.clone()],
                 &mut chunk.truncated[rows],
                 &mut chunk.episodes,
-            );
+            )?;
         }
         chunk
             .last_observations
@@ -118,6 +190,8 @@ impl<E: RolloutEnv> Collector<E> {
 /// Errors of the actor.
 #[derive(Debug, thiserror::Error)]
 pub enum ActorError {
+    #[error("environment: {0}")]
+    Env(String),
     #[error("dimension mismatch: {0}")]
     Dims(String),
     #[error("policy: {0}")]

@@ -18,6 +18,38 @@ pub struct BenchArgs {
 pub enum BenchCommand {
     /// Simulator throughput: N envs, random actions, physics + observations + rewards + resets.
     Sim(SimBenchArgs),
+    /// Learner throughput: one full PPO update (5 epochs × 4 minibatches) on synthetic data, and
+    /// policy inference for a batch of `envs` observations.
+    Learner(LearnerBenchArgs),
+}
+
+/// `l3p bench learner` arguments.
+#[derive(Debug, Args)]
+pub struct LearnerBenchArgs {
+    /// Parallel envs (batch = envs × steps).
+    #[arg(long, default_value_t = 1024)]
+    pub envs: usize,
+    /// Steps per env per update.
+    #[arg(long, default_value_t = 24)]
+    pub steps: usize,
+    /// Observation size.
+    #[arg(long, default_value_t = 48)]
+    pub obs: usize,
+    /// Action size.
+    #[arg(long, default_value_t = 12)]
+    pub actions: usize,
+    /// Actor and critic hidden sizes, comma separated.
+    #[arg(long, default_value = "512,256,128", value_delimiter = ',')]
+    pub hidden: Vec<usize>,
+    /// Threads for the tensor kernels.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Architecture: mlp (rsl_rl's ActorCritic) or l3p.
+    #[arg(long, default_value = "mlp")]
+    pub mode: String,
+    /// Timed updates (median reported, after one warm-up).
+    #[arg(long, default_value_t = 2)]
+    pub updates: usize,
 }
 
 /// Terrain choices for the benchmark.
@@ -60,7 +92,36 @@ pub struct SimBenchArgs {
 pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     match args.command {
         BenchCommand::Sim(a) => sim(a),
+        BenchCommand::Learner(a) => learner(a),
     }
+}
+
+fn learner(a: LearnerBenchArgs) -> anyhow::Result<()> {
+    let cfg = l3p_learner::bench::LearnerBenchConfig {
+        mode: a.mode.parse()?,
+        envs: a.envs,
+        steps: a.steps,
+        obs_dim: a.obs,
+        action_dim: a.actions,
+        hidden: a.hidden.clone(),
+        updates: a.updates,
+        seed: 1,
+        threads: a.threads,
+    };
+    let r = l3p_learner::bench::run_learner_bench(&cfg)?;
+    println!(
+        "bench learner: mode {} obs {} hidden {:?} envs {} x {} steps threads {} (actor params {})",
+        a.mode, a.obs, a.hidden, a.envs, a.steps, a.threads, r.actor_params
+    );
+    println!(
+        "  update (5 epochs x 4 minibatches): {:.3} s, {:.0} samples/s",
+        r.update_seconds, r.samples_per_second
+    );
+    println!(
+        "  inference, batch {}: burn {:.0} obs/s, pure-Rust export {:.0} obs/s",
+        a.envs, r.infer_burn_obs_per_second, r.infer_rust_obs_per_second
+    );
+    Ok(())
 }
 
 fn sim(a: SimBenchArgs) -> anyhow::Result<()> {

@@ -2,7 +2,13 @@
 //! section, and one module per command group holding its argument struct and `run` function. The
 //! modules only parse and glue; the work lives in the library crates.
 
-pub mod config;
+pub mod actor_cmd;
 pub mod bench_cmd;
+pub mod config;
 pub mod config_cmd;
+pub mod learner_cmd;
+pub mod metrics_cmd;
+pub mod report_cmd;
 pub mod robots_cmd;
+pub mod runtime;
+pub mod train_cmd;

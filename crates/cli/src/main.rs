@@ -15,6 +15,16 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Train locally: registry, learner and actors on loopback Zenoh, data under ./l3p-data/<run>/.
+    Train(l3p_cli::train_cmd::TrainArgs),
+    /// Run the learner daemon (PPO over Zenoh).
+    Learner(l3p_cli::learner_cmd::LearnerArgs),
+    /// Run a rollout actor daemon for one robot.
+    Actor(l3p_cli::actor_cmd::ActorArgs),
+    /// Show a run's metrics (from its file, or live with --follow).
+    Metrics(l3p_cli::metrics_cmd::MetricsArgs),
+    /// Draw a run's training curves (SVG) and print the convergence row.
+    Report(l3p_cli::report_cmd::ReportArgs),
     /// List the built-in robots or check a robot / URDF file (load, stand under PD).
     Robots(l3p_cli::robots_cmd::RobotsArgs),
     /// Benchmarks (`bench sim`: simulator throughput).
@@ -27,6 +37,11 @@ fn main() -> anyhow::Result<()> {
     logging::init();
     let cli = Cli::parse();
     match cli.command {
+        Command::Train(args) => l3p_cli::train_cmd::run(args),
+        Command::Learner(args) => l3p_cli::learner_cmd::run(args),
+        Command::Actor(args) => l3p_cli::actor_cmd::run(args),
+        Command::Metrics(args) => l3p_cli::metrics_cmd::run(args),
+        Command::Report(args) => l3p_cli::report_cmd::run(args),
         Command::Config(args) => l3p_cli::config_cmd::run(args),
         Command::Robots(args) => l3p_cli::robots_cmd::run(args),
         Command::Bench(args) => l3p_cli::bench_cmd::run(args),

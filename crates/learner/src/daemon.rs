@@ -73,6 +73,19 @@ pub struct LearnerOptions {
     pub policy: PolicyConfig,
     /// Robots this run trains, with their observation and action sizes.
     pub robots: Vec<RobotSpec>,
+    /// Write checkpoints and deployable policies to the registry as well (and resume from it when
+    /// the run directory has no checkpoint).
+    pub use_registry: bool,
+}
+
+/// Registry name of a run's checkpoints.
+pub fn checkpoint_artifact(run: &str) -> String {
+    format!("{run}-checkpoint")
+}
+
+/// Registry name of a run's deployable policy for one robot.
+pub fn deploy_artifact(run: &str, robot: &str) -> String {
+    format!("{run}-{robot}")
 }
 
 /// What the loop reacts to.
@@ -111,6 +124,8 @@ pub enum DaemonError {
     Learner(#[from] LearnerError),
     #[error("zenoh: {0}")]
     Zenoh(String),
+    #[error("registry: {0}")]
+    Registry(#[from] l3p_registry::RegistryError),
     #[error("cannot write {path}: {source}")]
     Io {
         path: PathBuf,
@@ -153,12 +168,20 @@ fn sha256_hex(bytes: &[u8]) -> String {
 }
 
 /// Build the PPO state: resume from the run's checkpoint when there is one, else start per mode.
-fn start_ppo(opts: &LearnerOptions) -> Result<Ppo, LearnerError> {
+fn start_ppo(opts: &LearnerOptions, from_registry: Option<Vec<u8>>) -> Result<Ppo, LearnerError> {
     let device = l3p_policy::train_device();
     let path = checkpoint_path(&opts.run_dir);
     if path.exists() {
         let ppo = Ppo::load(opts.ppo.clone(), &path, device)?;
         info!(iteration = ppo.iteration(), path = %path.display(), "resumed from checkpoint");
+        return Ok(ppo);
+    }
+    if let Some(bytes) = from_registry {
+        let ppo = Ppo::from_checkpoint_bytes(opts.ppo.clone(), &bytes, device)?;
+        info!(
+            iteration = ppo.iteration(),
+            "resumed from the registry's latest checkpoint"
+        );
         return Ok(ppo);
     }
     let init_from = match opts.ppo.mode {
@@ -228,6 +251,61 @@ fn publish_weights(
         *p = Published { version, blobs };
     }
     Ok(entries)
+}
+
+/// Write the checkpoint to the run directory (atomically) and, with a registry, store it there too
+/// along with each robot's deployable policy (`<run>-<robot>`, alias `latest`).
+async fn save_checkpoint(
+    ppo: &Ppo,
+    opts: &LearnerOptions,
+    registry: Option<&l3p_registry::RegistryClient>,
+    record: &MetricsRecord,
+) -> Result<(), DaemonError> {
+    use l3p_registry::{ArtifactKind, PutRequest};
+    let bytes = ppo.checkpoint_bytes()?;
+    write_atomic(&checkpoint_path(&opts.run_dir), &bytes)?;
+    let Some(client) = registry else {
+        return Ok(());
+    };
+    let summary = |mut req: PutRequest| {
+        for key in [
+            "episode_return",
+            "terrain_level",
+            "lin_vel_error",
+            "yaw_rate_error",
+        ] {
+            if let Some(v) = record.values.get(key) {
+                req = req.metric(key, *v);
+            }
+        }
+        req.metric("iteration", ppo.iteration() as f64)
+            .producer(&format!("learner/{}", opts.run))
+            .config(serde_json::json!({ "mode": opts.ppo.mode.as_str(), "policy": opts.policy }))
+    };
+    let checkpoint = client
+        .put(summary(PutRequest::new(
+            &checkpoint_artifact(&opts.run),
+            ArtifactKind::Checkpoint,
+            bytes,
+        )))
+        .await?;
+    for spec in &opts.robots {
+        let (export, config) = ppo.export(&spec.name)?;
+        let req = PutRequest::new(
+            &deploy_artifact(&opts.run, &spec.name),
+            ArtifactKind::Deploy,
+            export,
+        )
+        .robot(&spec.name)
+        .dim("obs_dim", config.obs_dim as u64)
+        .dim("action_dim", config.action_dim as u64)
+        .lineage(
+            l3p_registry::LineageRole::FromCheckpoint,
+            &format!("{}@{}", checkpoint.meta.name, checkpoint.meta.version),
+        );
+        client.put(summary(req)).await?;
+    }
+    Ok(())
 }
 
 /// Append one metrics record to the run's file and publish it on Zenoh.
@@ -332,7 +410,17 @@ pub async fn run(
         .map(|r| (r.name.clone(), (r.obs_dim, r.action_dim)))
         .collect();
 
-    let mut ppo = start_ppo(&opts)?;
+    let registry = opts
+        .use_registry
+        .then(|| l3p_registry::RegistryClient::new(&session));
+    let from_registry = match &registry {
+        Some(client) if !checkpoint_path(&opts.run_dir).exists() => client
+            .try_get_blob(&format!("{}@latest", checkpoint_artifact(&run)))
+            .await?
+            .map(|(_, bytes)| bytes),
+        _ => None,
+    };
+    let mut ppo = start_ppo(&opts, from_registry)?;
     let published = Arc::new(RwLock::new(Published::default()));
     let mut weights = publish_weights(&ppo, &run, &opts.robots, &published)?;
 
@@ -581,6 +669,10 @@ pub async fn run(
         record.insert("transport_share", transport / iteration_seconds.max(1e-9));
         weights_seconds = 0.0;
         emit_metrics(&session, &metrics_file, &record).await?;
+        if new_version - last_checkpoint >= opts.daemon.checkpoint_every.max(1) {
+            save_checkpoint(&ppo, &opts, registry.as_ref(), &record).await?;
+            last_checkpoint = new_version;
+        }
         if let Some(progress) = &progress {
             let _ = progress.send(IterationReport {
                 iteration: new_version,
@@ -588,16 +680,13 @@ pub async fn run(
                 metrics: record,
             });
         }
-        if new_version - last_checkpoint >= opts.daemon.checkpoint_every.max(1) {
-            write_atomic(&checkpoint_path(&opts.run_dir), &ppo.checkpoint_bytes()?)?;
-            last_checkpoint = new_version;
-        }
         gather_start = Instant::now();
     };
 
     // Final checkpoint, whatever stopped us.
     if ppo.iteration() != last_checkpoint || !checkpoint_path(&opts.run_dir).exists() {
-        write_atomic(&checkpoint_path(&opts.run_dir), &ppo.checkpoint_bytes()?)?;
+        let record = MetricsRecord::new(&run, "learner", ppo.iteration(), unix_ms());
+        save_checkpoint(&ppo, &opts, registry.as_ref(), &record).await?;
         info!(iteration = ppo.iteration(), "final checkpoint written");
     }
     cancel.cancel();
