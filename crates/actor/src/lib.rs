@@ -333,18 +333,24 @@ pub async fn run<E: RolloutEnv>(
         if opts.max_chunks > 0 && seq >= opts.max_chunks {
             break;
         }
-        // The newest announce we have not collected for yet.
-        let announce = tokio::select! {
+        // The newest announce queued. Versions only grow while a learner lives; an announce older
+        // than the last one collected means the learner restarted from a checkpoint: follow it.
+        let sample = tokio::select! {
             _ = cancel.cancelled() => break,
-            sample = announces.recv_async() => match sample {
-                Ok(s) => match codec::decode_json::<PolicyAnnounce>(&s.payload().to_bytes()) {
-                    Ok(a) => a,
-                    Err(e) => { warn!("ignored announce: {e}"); continue; }
-                },
-                Err(_) => break,
-            },
+            sample = announces.recv_async() => match sample { Ok(s) => s, Err(_) => break },
         };
-        if last_collected.is_some_and(|v| announce.version <= v) {
+        let mut newest = sample;
+        while let Ok(Some(next)) = announces.try_recv() {
+            newest = next;
+        }
+        let announce = match codec::decode_json::<PolicyAnnounce>(&newest.payload().to_bytes()) {
+            Ok(a) => a,
+            Err(e) => {
+                warn!("ignored announce: {e}");
+                continue;
+            }
+        };
+        if last_collected == Some(announce.version) {
             continue;
         }
         let fetch_start = Instant::now();
@@ -435,4 +441,64 @@ pub async fn run<E: RolloutEnv>(
         chunk = Some(ch);
     }
     Ok(seq)
+}
+
+/// What `l3p eval` reports: means over finished episodes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EvalSummary {
+    pub episodes: usize,
+    pub episode_return: f32,
+    pub episode_length: f32,
+    pub terrain_level: f32,
+    pub lin_vel_error: f32,
+    pub yaw_rate_error: f32,
+    /// Share of episodes that ended by termination (fall, base contact) rather than time-out.
+    pub fall_fraction: f32,
+}
+
+/// Play `policy` deterministically (action means, no exploration noise) until `episodes` episodes
+/// have finished or `max_steps` control steps have passed.
+pub fn evaluate<E: RolloutEnv>(
+    env: &mut E,
+    policy: &DeployPolicy,
+    episodes: usize,
+    max_steps: usize,
+) -> Result<EvalSummary, ActorError> {
+    let (n, od, ad) = (env.num_envs(), env.obs_dim(), env.action_dim());
+    if policy.obs_dim() != od || policy.action_dim() != ad {
+        return Err(ActorError::Dims(format!(
+            "policy has obs {} / action {}, environment has obs {od} / action {ad}",
+            policy.obs_dim(),
+            policy.action_dim()
+        )));
+    }
+    let (mut rewards, mut terminated, mut truncated) =
+        (vec![0.0; n], vec![false; n], vec![false; n]);
+    let (mut means, mut scratch, mut finished) = (Vec::new(), InferScratch::default(), Vec::new());
+    for _ in 0..max_steps {
+        policy
+            .act_into(env.observations(), &mut means, &mut scratch)
+            .map_err(|e| ActorError::Policy(e.to_string()))?;
+        env.step(
+            &means,
+            &mut rewards,
+            &mut terminated,
+            &mut truncated,
+            &mut finished,
+        )?;
+        if finished.len() >= episodes {
+            break;
+        }
+    }
+    let k = finished.len().max(1) as f32;
+    let mean = |f: &dyn Fn(&EpisodeStats) -> f32| finished.iter().map(f).sum::<f32>() / k;
+    Ok(EvalSummary {
+        episodes: finished.len(),
+        episode_return: mean(&|e| e.episode_return),
+        episode_length: mean(&|e| e.length as f32),
+        terrain_level: mean(&|e| e.terrain_level),
+        lin_vel_error: mean(&|e| e.lin_vel_error),
+        yaw_rate_error: mean(&|e| e.yaw_rate_error),
+        fall_fraction: mean(&|e| if e.terminated { 1.0 } else { 0.0 }),
+    })
 }

@@ -23,6 +23,8 @@ enum Command {
     Actor(l3p_cli::actor_cmd::ActorArgs),
     /// Show a run's metrics (from its file, or live with --follow).
     Metrics(l3p_cli::metrics_cmd::MetricsArgs),
+    /// Play a policy without learning and print tracking errors, reward and falls.
+    Eval(l3p_cli::eval_cmd::EvalArgs),
     /// Draw a run's training curves (SVG) and print the convergence row.
     Report(l3p_cli::report_cmd::ReportArgs),
     /// List the built-in robots or check a robot / URDF file (load, stand under PD).
@@ -41,6 +43,7 @@ fn main() -> anyhow::Result<()> {
         Command::Learner(args) => l3p_cli::learner_cmd::run(args),
         Command::Actor(args) => l3p_cli::actor_cmd::run(args),
         Command::Metrics(args) => l3p_cli::metrics_cmd::run(args),
+        Command::Eval(args) => l3p_cli::eval_cmd::run(args),
         Command::Report(args) => l3p_cli::report_cmd::run(args),
         Command::Config(args) => l3p_cli::config_cmd::run(args),
         Command::Robots(args) => l3p_cli::robots_cmd::run(args),

@@ -603,9 +603,10 @@ pub async fn run(
         }
 
         let waited = gather_start.elapsed().as_secs_f64();
-        let everyone_reported = live.len() >= opts.daemon.min_actors
-            && !live.is_empty()
-            && live.iter().all(|id| pending.contains_key(id));
+        // `min_actors` only gates a fresh run's first update; later, whoever is alive counts.
+        let enough_actors = live.len() >= opts.daemon.min_actors || ppo.iteration() > 0;
+        let everyone_reported =
+            enough_actors && !live.is_empty() && live.iter().all(|id| pending.contains_key(id));
         let timed_out = waited > opts.daemon.gather_timeout_s && !pending.is_empty();
         if !(everyone_reported || timed_out) {
             continue;
