@@ -9,6 +9,7 @@ pub mod config_cmd;
 pub mod eval_cmd;
 pub mod learner_cmd;
 pub mod metrics_cmd;
+pub mod registry_cmd;
 pub mod report_cmd;
 pub mod robots_cmd;
 pub mod runtime;

@@ -31,6 +31,8 @@ enum Command {
     Robots(l3p_cli::robots_cmd::RobotsArgs),
     /// Benchmarks (`bench sim`: simulator throughput).
     Bench(l3p_cli::bench_cmd::BenchArgs),
+    /// The artifact registry: serve it, or list/show/pull/put/tag/history/lineage.
+    Registry(l3p_cli::registry_cmd::RegistryArgs),
     /// Check a TOML config file: parse it strictly and print the resolved values.
     Config(l3p_cli::config_cmd::ConfigArgs),
 }
@@ -46,6 +48,7 @@ fn main() -> anyhow::Result<()> {
         Command::Eval(args) => l3p_cli::eval_cmd::run(args),
         Command::Report(args) => l3p_cli::report_cmd::run(args),
         Command::Config(args) => l3p_cli::config_cmd::run(args),
+        Command::Registry(args) => l3p_cli::registry_cmd::run(args),
         Command::Robots(args) => l3p_cli::robots_cmd::run(args),
         Command::Bench(args) => l3p_cli::bench_cmd::run(args),
     }

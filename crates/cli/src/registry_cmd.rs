@@ -1,0 +1,423 @@
+//! `l3p registry serve|list|show|pull|put|tag|history|lineage`: the artifact registry from the
+//! command line. `serve` runs the Zenoh service on a local database; the other commands talk to a
+//! running service through Zenoh (`--connect`, default `tcp/127.0.0.1:7447`), or, with `--data <dir>`,
+//! open `<dir>/registry.db` directly without any service (SQLite locking keeps that safe next to a
+//! running service).
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::Context;
+use clap::{Args, Subcommand};
+use l3p_registry::net::{ZenohSettings, open_session};
+use l3p_registry::{
+    AliasEvent, ArtifactKind, ArtifactMeta, LineageGraph, LineageRole, ListFilter, PutOutcome, PutRequest,
+    Registry, RegistryClient, TagOutcome,
+};
+use tokio_util::sync::CancellationToken;
+
+#[derive(Debug, Args)]
+pub struct RegistryArgs {
+    #[command(subcommand)]
+    pub command: RegistryCommand,
+}
+
+/// Where client commands find the registry.
+#[derive(Debug, Clone, Args)]
+pub struct Target {
+    /// Zenoh endpoint of the registry service (repeatable).
+    #[arg(long, default_value = "tcp/127.0.0.1:7447")]
+    pub connect: Vec<String>,
+    /// Read and write `<dir>/registry.db` directly instead of asking a service.
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum RegistryCommand {
+    /// Serve the registry over Zenoh until Ctrl-C.
+    Serve {
+        /// Data directory holding registry.db.
+        #[arg(long, default_value = "l3p-data")]
+        data: PathBuf,
+        /// Endpoints to listen on (repeatable).
+        #[arg(long, default_value = "tcp/127.0.0.1:7447")]
+        listen: Vec<String>,
+        /// Endpoints (routers or peers) to connect to (repeatable).
+        #[arg(long)]
+        connect: Vec<String>,
+        /// Enable multicast scouting (LAN discovery); off by default.
+        #[arg(long)]
+        scouting: bool,
+        /// Zenoh JSON5 config file (TLS, ACL, ...), loaded before the flags above.
+        #[arg(long)]
+        zenoh_config: Option<PathBuf>,
+    },
+    /// List stored versions.
+    List {
+        #[arg(long)]
+        kind: Option<ArtifactKind>,
+        #[arg(long)]
+        name: Option<String>,
+        #[arg(long)]
+        robot: Option<String>,
+        /// Print the JSON reply instead of a table.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        target: Target,
+    },
+    /// Show one version's metadata: `<name>@<version|alias>`.
+    Show {
+        artifact: String,
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        target: Target,
+    },
+    /// Download a version's blob (hash checked) to a file.
+    Pull {
+        artifact: String,
+        #[arg(short, long)]
+        output: PathBuf,
+        #[command(flatten)]
+        target: Target,
+    },
+    /// Store a file as the next version of a name.
+    Put {
+        file: PathBuf,
+        #[arg(long)]
+        name: String,
+        #[arg(long)]
+        kind: ArtifactKind,
+        #[arg(long)]
+        robot: Option<String>,
+        /// Producer recorded with the version.
+        #[arg(long, default_value = "cli")]
+        producer: String,
+        /// Free JSON metadata (`extra`).
+        #[arg(long)]
+        extra: Option<String>,
+        /// Lineage edge `role=name@version|alias` (repeatable), e.g. `trained_against=a1-core@3`.
+        #[arg(long)]
+        lineage: Vec<String>,
+        /// Alias to point at the new version (repeatable).
+        #[arg(long)]
+        alias: Vec<String>,
+        #[command(flatten)]
+        target: Target,
+    },
+    /// Point an alias at a version: `tag a1-core@3 prod`.
+    Tag {
+        artifact: String,
+        alias: String,
+        #[command(flatten)]
+        target: Target,
+    },
+    /// Show how a name's aliases moved.
+    History {
+        name: String,
+        #[arg(long)]
+        alias: Option<String>,
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        target: Target,
+    },
+    /// Show what a version depends on and what depends on it.
+    Lineage {
+        artifact: String,
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        target: Target,
+    },
+}
+
+pub fn run(args: RegistryArgs) -> anyhow::Result<()> {
+    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    runtime.block_on(run_async(args.command))
+}
+
+/// The registry a client command talks to.
+enum Backend {
+    Local(Registry),
+    Remote(RegistryClient),
+}
+
+impl Backend {
+    async fn connect(target: &Target) -> anyhow::Result<Self> {
+        if let Some(dir) = &target.data {
+            return Ok(Self::Local(Registry::open(dir)?));
+        }
+        let settings = ZenohSettings {
+            mode: "peer".into(),
+            listen: Vec::new(),
+            connect: target.connect.clone(),
+            multicast_scouting: false,
+            config_file: None,
+        };
+        let session = open_session(&settings).await?;
+        Ok(Self::Remote(RegistryClient::new(&session)))
+    }
+
+    async fn list(&self, filter: &ListFilter) -> anyhow::Result<Vec<ArtifactMeta>> {
+        Ok(match self {
+            Self::Local(r) => r.list(filter)?,
+            Self::Remote(c) => c.list(filter).await?,
+        })
+    }
+
+    async fn get_meta(&self, reference: &str) -> anyhow::Result<ArtifactMeta> {
+        Ok(match self {
+            Self::Local(r) => r.get_meta(reference)?,
+            Self::Remote(c) => c.get_meta(reference).await?,
+        })
+    }
+
+    async fn get_blob(&self, reference: &str) -> anyhow::Result<(ArtifactMeta, Vec<u8>)> {
+        Ok(match self {
+            Self::Local(r) => r.get_blob(reference)?,
+            Self::Remote(c) => c.get_blob(reference).await?,
+        })
+    }
+
+    async fn put(&self, req: PutRequest) -> anyhow::Result<PutOutcome> {
+        Ok(match self {
+            Self::Local(r) => r.put(req)?,
+            Self::Remote(c) => c.put(req).await?,
+        })
+    }
+
+    async fn tag(&self, reference: &str, alias: &str) -> anyhow::Result<TagOutcome> {
+        Ok(match self {
+            Self::Local(r) => r.tag(reference, alias)?,
+            Self::Remote(c) => c.tag(reference, alias).await?,
+        })
+    }
+
+    async fn history(&self, name: &str, alias: Option<&str>) -> anyhow::Result<Vec<AliasEvent>> {
+        Ok(match self {
+            Self::Local(r) => r.alias_history(name, alias)?,
+            Self::Remote(c) => c.alias_history(name, alias).await?,
+        })
+    }
+
+    async fn lineage(&self, reference: &str) -> anyhow::Result<LineageGraph> {
+        Ok(match self {
+            Self::Local(r) => r.lineage(reference)?,
+            Self::Remote(c) => c.lineage(reference).await?,
+        })
+    }
+
+    /// Release the backend (the Zenoh session closes when its last handle drops).
+    async fn close(self) {
+        drop(self);
+    }
+}
+
+async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
+    match command {
+        RegistryCommand::Serve { data, listen, connect, scouting, zenoh_config } => {
+            serve(&data, listen, connect, scouting, zenoh_config).await
+        }
+        RegistryCommand::List { kind, name, robot, json, target } => {
+            let backend = Backend::connect(&target).await?;
+            let artifacts = backend.list(&ListFilter { kind, name, robot }).await?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&artifacts)?);
+            } else {
+                print_table(&artifacts);
+            }
+            backend.close().await;
+            Ok(())
+        }
+        RegistryCommand::Show { artifact, json, target } => {
+            let backend = Backend::connect(&target).await?;
+            let meta = backend.get_meta(&artifact).await?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&meta)?);
+            } else {
+                print_meta(&meta)?;
+            }
+            backend.close().await;
+            Ok(())
+        }
+        RegistryCommand::Pull { artifact, output, target } => {
+            let backend = Backend::connect(&target).await?;
+            let (meta, bytes) = backend.get_blob(&artifact).await?;
+            write_atomically(&output, &bytes)?;
+            println!(
+                "{} -> {} ({} bytes, sha256 {})",
+                meta.reference(),
+                output.display(),
+                meta.size,
+                meta.sha256
+            );
+            backend.close().await;
+            Ok(())
+        }
+        RegistryCommand::Put { file, name, kind, robot, producer, extra, lineage, alias, target } => {
+            let bytes = std::fs::read(&file).with_context(|| format!("cannot read {}", file.display()))?;
+            let mut req = PutRequest::new(&name, kind, bytes).producer(&producer);
+            if let Some(robot) = robot {
+                req = req.robot(&robot);
+            }
+            if let Some(extra) = extra {
+                req = req.extra(serde_json::from_str(&extra).context("--extra is not valid JSON")?);
+            }
+            for edge in &lineage {
+                let (role, artifact) = edge
+                    .split_once('=')
+                    .with_context(|| format!("--lineage {edge:?}: expected role=name@version"))?;
+                req = req.lineage(role.parse::<LineageRole>()?, artifact);
+            }
+            for alias in &alias {
+                req = req.alias(alias);
+            }
+            let backend = Backend::connect(&target).await?;
+            let outcome = backend.put(req).await?;
+            let what = if outcome.created { "stored" } else { "already stored (identical content)" };
+            println!("{} {what}, sha256 {}", outcome.meta.reference(), outcome.meta.sha256);
+            backend.close().await;
+            Ok(())
+        }
+        RegistryCommand::Tag { artifact, alias, target } => {
+            let backend = Backend::connect(&target).await?;
+            let outcome = backend.tag(&artifact, &alias).await?;
+            let e = &outcome.event;
+            match (outcome.moved, e.previous) {
+                (false, _) => println!("{}@{} already points at version {}", e.name, e.alias, e.version),
+                (true, Some(previous)) => println!("{}@{}: {previous} -> {}", e.name, e.alias, e.version),
+                (true, None) => println!("{}@{}: new -> {}", e.name, e.alias, e.version),
+            }
+            backend.close().await;
+            Ok(())
+        }
+        RegistryCommand::History { name, alias, json, target } => {
+            let backend = Backend::connect(&target).await?;
+            let events = backend.history(&name, alias.as_deref()).await?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&events)?);
+            } else {
+                println!("{:<14} {:<12} {:>8} {:>8}", "UNIX_MS", "ALIAS", "FROM", "TO");
+                for e in &events {
+                    let from = e.previous.map(|p| p.to_string()).unwrap_or_else(|| "-".into());
+                    println!("{:<14} {:<12} {:>8} {:>8}", e.unix_ms, e.alias, from, e.version);
+                }
+            }
+            backend.close().await;
+            Ok(())
+        }
+        RegistryCommand::Lineage { artifact, json, target } => {
+            let backend = Backend::connect(&target).await?;
+            let graph = backend.lineage(&artifact).await?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&graph)?);
+            } else {
+                println!("{} ({})", graph.artifact.reference(), graph.artifact.kind);
+                println!("depends on:");
+                for link in &graph.upstream {
+                    println!("  {} --{}--> {}", link.child, link.role, link.parent);
+                }
+                println!("used by:");
+                for link in &graph.downstream {
+                    println!("  {} --{}--> {}", link.child, link.role, link.parent);
+                }
+            }
+            backend.close().await;
+            Ok(())
+        }
+    }
+}
+
+async fn serve(
+    data: &Path,
+    listen: Vec<String>,
+    connect: Vec<String>,
+    scouting: bool,
+    config_file: Option<PathBuf>,
+) -> anyhow::Result<()> {
+    let registry = Arc::new(Registry::open(data)?);
+    let settings =
+        ZenohSettings { mode: "peer".into(), listen, connect, multicast_scouting: scouting, config_file };
+    let session = open_session(&settings).await?;
+    let cancel = CancellationToken::new();
+    let on_signal = cancel.clone();
+    tokio::spawn(async move {
+        if tokio::signal::ctrl_c().await.is_ok() {
+            tracing::info!("interrupted, stopping the registry service");
+        }
+        on_signal.cancel();
+    });
+    eprintln!("registry {} serving on {:?}", registry.path().display(), settings.listen);
+    l3p_registry::serve(&session, registry, cancel).await?;
+    session.close().await.map_err(|e| anyhow::anyhow!("closing the zenoh session: {e}"))?;
+    Ok(())
+}
+
+fn print_table(artifacts: &[ArtifactMeta]) {
+    println!(
+        "{:<24} {:>4} {:<10} {:<10} {:>10} {:<12} ALIASES",
+        "NAME", "VER", "KIND", "ROBOT", "SIZE", "SHA256"
+    );
+    for m in artifacts {
+        println!(
+            "{:<24} {:>4} {:<10} {:<10} {:>10} {:<12} {}",
+            m.name,
+            m.version,
+            m.kind,
+            m.robot.as_deref().unwrap_or("-"),
+            m.size,
+            &m.sha256[..m.sha256.len().min(12)],
+            m.aliases.join(",")
+        );
+    }
+}
+
+fn print_meta(m: &ArtifactMeta) -> anyhow::Result<()> {
+    println!("artifact:  {}", m.reference());
+    println!("kind:      {}", m.kind);
+    println!("robot:     {}", m.robot.as_deref().unwrap_or("-"));
+    println!("size:      {} bytes", m.size);
+    println!("sha256:    {}", m.sha256);
+    println!("created:   {} (unix ms)", m.created_unix_ms);
+    println!("producer:  {}", if m.producer.is_empty() { "-" } else { &m.producer });
+    println!("aliases:   {}", if m.aliases.is_empty() { "-".to_string() } else { m.aliases.join(", ") });
+    for (key, value) in &m.dims {
+        println!("dim:       {key} = {value}");
+    }
+    for (key, value) in &m.metrics {
+        println!("metric:    {key} = {value}");
+    }
+    for edge in &m.lineage {
+        println!(
+            "lineage:   {} {} (sha256 {})",
+            edge.role,
+            edge.reference(),
+            &edge.sha256[..edge.sha256.len().min(12)]
+        );
+    }
+    if !m.config.is_null() {
+        println!("config:    {}", serde_json::to_string(&m.config)?);
+    }
+    if !m.extra.is_null() {
+        println!("extra:     {}", serde_json::to_string(&m.extra)?);
+    }
+    Ok(())
+}
+
+/// Write `bytes` to `path` through a temporary file in the same directory, fsync, then rename.
+fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let file_name = path.file_name().with_context(|| format!("{} is not a file path", path.display()))?;
+    let tmp = dir.join(format!(".{}.part", file_name.to_string_lossy()));
+    let mut file = std::fs::File::create(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
+    file.write_all(bytes)
+        .and_then(|_| file.sync_all())
+        .with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, path)
+        .with_context(|| format!("cannot rename {} to {}", tmp.display(), path.display()))?;
+    Ok(())
+}
