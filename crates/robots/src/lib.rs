@@ -4,6 +4,27 @@
 //! rapier simulation (`sim`), the terrain generator and curriculum (`terrain`), the locomotion task —
 //! observations, rewards, commands, terminations (`task`) — and the vectorised environment (`vecenv`).
 //!
+//! # Public API (physics side)
+//! - [`catalog::RobotSpec`]: `RobotSpec::by_name("a1")?`, `RobotSpec::all()`; fields `joint_names`
+//!   (canonical order FL, FR, RL, RR × hip abduction, hip flexion, knee), `default_pose`,
+//!   `training_gains`, `stand_gains`, `effort_limit`, `saturation_effort`, `velocity_limit`,
+//!   `action_scale`, `base_link`, `foot_links`, `penalised_links`, `termination_links`;
+//!   `spec.model()` parses the embedded URDF, `spec.nominal_standing_height()`.
+//! - [`urdf::load_urdf_file`] / [`urdf::load_urdf_str`] → [`model::RobotModel`] (bodies after fixed-joint
+//!   merging; `total_mass()`, `num_actuated()`, `joint_names()`, `standing_height(q)`), errors
+//!   [`urdf::UrdfError`] with file, element and line.
+//! - [`sim::SimWorld`]: `new(SimConfig)`, `add_flat_ground`, `add_heightfield_ground`, `add_robot(model,
+//!   binding, actuator, pose, q) -> index`, `set_targets`, `step` (one physics step, PD inside),
+//!   `clear_contact_maxima`, `read_state(i, &mut task::RobotState)`, `reset_robot`, `push_base`,
+//!   `set_friction`, `set_added_base_mass`. [`actuator::Actuator`] / [`actuator::dc_motor_clip`].
+//! - [`vecenv::VecEnv`]: `VecEnv::new(&spec, &EnvConfig, num_envs, threads, seed)?`, `obs_dim()`,
+//!   `action_dim()`, `reset_all() -> &[f32]` (`[N * obs_dim]`), `step(&actions)? -> StepOutput { obs,
+//!   rewards, terminated, truncated, episodes: &[EpisodeInfo] }`, `timings() -> StageTimings`
+//!   (physics, observations, rewards, resets), `nan_resets()`, `curriculum()` (mean level, per type),
+//!   `robot_state(e)`. Observations of reset envs are those of the new episode (legged_gym order).
+//! - [`bench::run_sim_bench`], [`bench::stand_check`]: the work behind `l3p bench sim` and
+//!   `l3p robots check`.
+//!
 //! Architecture invariant: this crate knows nothing of burn, Zenoh or tokio.
 
 pub mod actuator;
