@@ -12,8 +12,8 @@ use anyhow::Context;
 use clap::{Args, Subcommand};
 use l3p_registry::net::{ZenohSettings, open_session};
 use l3p_registry::{
-    AliasEvent, ArtifactKind, ArtifactMeta, LineageGraph, LineageRole, ListFilter, PutOutcome, PutRequest,
-    Registry, RegistryClient, TagOutcome,
+    AliasEvent, ArtifactKind, ArtifactMeta, LineageGraph, LineageRole, ListFilter, PutOutcome,
+    PutRequest, Registry, RegistryClient, TagOutcome,
 };
 use tokio_util::sync::CancellationToken;
 
@@ -136,7 +136,9 @@ pub enum RegistryCommand {
 }
 
 pub fn run(args: RegistryArgs) -> anyhow::Result<()> {
-    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()?;
     runtime.block_on(run_async(args.command))
 }
 
@@ -219,10 +221,20 @@ impl Backend {
 
 async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
     match command {
-        RegistryCommand::Serve { data, listen, connect, scouting, zenoh_config } => {
-            serve(&data, listen, connect, scouting, zenoh_config).await
-        }
-        RegistryCommand::List { kind, name, robot, json, target } => {
+        RegistryCommand::Serve {
+            data,
+            listen,
+            connect,
+            scouting,
+            zenoh_config,
+        } => serve(&data, listen, connect, scouting, zenoh_config).await,
+        RegistryCommand::List {
+            kind,
+            name,
+            robot,
+            json,
+            target,
+        } => {
             let backend = Backend::connect(&target).await?;
             let artifacts = backend.list(&ListFilter { kind, name, robot }).await?;
             if json {
@@ -233,7 +245,11 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             backend.close().await;
             Ok(())
         }
-        RegistryCommand::Show { artifact, json, target } => {
+        RegistryCommand::Show {
+            artifact,
+            json,
+            target,
+        } => {
             let backend = Backend::connect(&target).await?;
             let meta = backend.get_meta(&artifact).await?;
             if json {
@@ -244,7 +260,11 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             backend.close().await;
             Ok(())
         }
-        RegistryCommand::Pull { artifact, output, target } => {
+        RegistryCommand::Pull {
+            artifact,
+            output,
+            target,
+        } => {
             let backend = Backend::connect(&target).await?;
             let (meta, bytes) = backend.get_blob(&artifact).await?;
             write_atomically(&output, &bytes)?;
@@ -258,8 +278,19 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             backend.close().await;
             Ok(())
         }
-        RegistryCommand::Put { file, name, kind, robot, producer, extra, lineage, alias, target } => {
-            let bytes = std::fs::read(&file).with_context(|| format!("cannot read {}", file.display()))?;
+        RegistryCommand::Put {
+            file,
+            name,
+            kind,
+            robot,
+            producer,
+            extra,
+            lineage,
+            alias,
+            target,
+        } => {
+            let bytes =
+                std::fs::read(&file).with_context(|| format!("cannot read {}", file.display()))?;
             let mut req = PutRequest::new(&name, kind, bytes).producer(&producer);
             if let Some(robot) = robot {
                 req = req.robot(&robot);
@@ -278,39 +309,74 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             }
             let backend = Backend::connect(&target).await?;
             let outcome = backend.put(req).await?;
-            let what = if outcome.created { "stored" } else { "already stored (identical content)" };
-            println!("{} {what}, sha256 {}", outcome.meta.reference(), outcome.meta.sha256);
+            let what = if outcome.created {
+                "stored"
+            } else {
+                "already stored (identical content)"
+            };
+            println!(
+                "{} {what}, sha256 {}",
+                outcome.meta.reference(),
+                outcome.meta.sha256
+            );
             backend.close().await;
             Ok(())
         }
-        RegistryCommand::Tag { artifact, alias, target } => {
+        RegistryCommand::Tag {
+            artifact,
+            alias,
+            target,
+        } => {
             let backend = Backend::connect(&target).await?;
             let outcome = backend.tag(&artifact, &alias).await?;
             let e = &outcome.event;
             match (outcome.moved, e.previous) {
-                (false, _) => println!("{}@{} already points at version {}", e.name, e.alias, e.version),
-                (true, Some(previous)) => println!("{}@{}: {previous} -> {}", e.name, e.alias, e.version),
+                (false, _) => println!(
+                    "{}@{} already points at version {}",
+                    e.name, e.alias, e.version
+                ),
+                (true, Some(previous)) => {
+                    println!("{}@{}: {previous} -> {}", e.name, e.alias, e.version)
+                }
                 (true, None) => println!("{}@{}: new -> {}", e.name, e.alias, e.version),
             }
             backend.close().await;
             Ok(())
         }
-        RegistryCommand::History { name, alias, json, target } => {
+        RegistryCommand::History {
+            name,
+            alias,
+            json,
+            target,
+        } => {
             let backend = Backend::connect(&target).await?;
             let events = backend.history(&name, alias.as_deref()).await?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&events)?);
             } else {
-                println!("{:<14} {:<12} {:>8} {:>8}", "UNIX_MS", "ALIAS", "FROM", "TO");
+                println!(
+                    "{:<14} {:<12} {:>8} {:>8}",
+                    "UNIX_MS", "ALIAS", "FROM", "TO"
+                );
                 for e in &events {
-                    let from = e.previous.map(|p| p.to_string()).unwrap_or_else(|| "-".into());
-                    println!("{:<14} {:<12} {:>8} {:>8}", e.unix_ms, e.alias, from, e.version);
+                    let from = e
+                        .previous
+                        .map(|p| p.to_string())
+                        .unwrap_or_else(|| "-".into());
+                    println!(
+                        "{:<14} {:<12} {:>8} {:>8}",
+                        e.unix_ms, e.alias, from, e.version
+                    );
                 }
             }
             backend.close().await;
             Ok(())
         }
-        RegistryCommand::Lineage { artifact, json, target } => {
+        RegistryCommand::Lineage {
+            artifact,
+            json,
+            target,
+        } => {
             let backend = Backend::connect(&target).await?;
             let graph = backend.lineage(&artifact).await?;
             if json {
@@ -340,8 +406,13 @@ async fn serve(
     config_file: Option<PathBuf>,
 ) -> anyhow::Result<()> {
     let registry = Arc::new(Registry::open(data)?);
-    let settings =
-        ZenohSettings { mode: "peer".into(), listen, connect, multicast_scouting: scouting, config_file };
+    let settings = ZenohSettings {
+        mode: "peer".into(),
+        listen,
+        connect,
+        multicast_scouting: scouting,
+        config_file,
+    };
     let session = open_session(&settings).await?;
     let cancel = CancellationToken::new();
     let on_signal = cancel.clone();
@@ -351,9 +422,16 @@ async fn serve(
         }
         on_signal.cancel();
     });
-    eprintln!("registry {} serving on {:?}", registry.path().display(), settings.listen);
+    eprintln!(
+        "registry {} serving on {:?}",
+        registry.path().display(),
+        settings.listen
+    );
     l3p_registry::serve(&session, registry, cancel).await?;
-    session.close().await.map_err(|e| anyhow::anyhow!("closing the zenoh session: {e}"))?;
+    session
+        .close()
+        .await
+        .map_err(|e| anyhow::anyhow!("closing the zenoh session: {e}"))?;
     Ok(())
 }
 
@@ -383,8 +461,22 @@ fn print_meta(m: &ArtifactMeta) -> anyhow::Result<()> {
     println!("size:      {} bytes", m.size);
     println!("sha256:    {}", m.sha256);
     println!("created:   {} (unix ms)", m.created_unix_ms);
-    println!("producer:  {}", if m.producer.is_empty() { "-" } else { &m.producer });
-    println!("aliases:   {}", if m.aliases.is_empty() { "-".to_string() } else { m.aliases.join(", ") });
+    println!(
+        "producer:  {}",
+        if m.producer.is_empty() {
+            "-"
+        } else {
+            &m.producer
+        }
+    );
+    println!(
+        "aliases:   {}",
+        if m.aliases.is_empty() {
+            "-".to_string()
+        } else {
+            m.aliases.join(", ")
+        }
+    );
     for (key, value) in &m.dims {
         println!("dim:       {key} = {value}");
     }
@@ -410,10 +502,16 @@ fn print_meta(m: &ArtifactMeta) -> anyhow::Result<()> {
 
 /// Write `bytes` to `path` through a temporary file in the same directory, fsync, then rename.
 fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let file_name = path.file_name().with_context(|| format!("{} is not a file path", path.display()))?;
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    let file_name = path
+        .file_name()
+        .with_context(|| format!("{} is not a file path", path.display()))?;
     let tmp = dir.join(format!(".{}.part", file_name.to_string_lossy()));
-    let mut file = std::fs::File::create(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
+    let mut file =
+        std::fs::File::create(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
     file.write_all(bytes)
         .and_then(|_| file.sync_all())
         .with_context(|| format!("cannot write {}", tmp.display()))?;

@@ -55,7 +55,13 @@ pub enum ArtifactKind {
 }
 
 impl ArtifactKind {
-    pub const ALL: [ArtifactKind; 5] = [Self::Core, Self::Adapter, Self::Mlp, Self::Checkpoint, Self::Deploy];
+    pub const ALL: [ArtifactKind; 5] = [
+        Self::Core,
+        Self::Adapter,
+        Self::Mlp,
+        Self::Checkpoint,
+        Self::Deploy,
+    ];
 
     pub fn as_str(self) -> &'static str {
         match self {
@@ -78,10 +84,14 @@ impl FromStr for ArtifactKind {
     type Err = RefError;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Self::ALL.into_iter().find(|k| k.as_str() == s).ok_or_else(|| RefError {
-            input: s.to_string(),
-            reason: "unknown artifact kind (expected core, adapter, mlp, checkpoint or deploy)".into(),
-        })
+        Self::ALL
+            .into_iter()
+            .find(|k| k.as_str() == s)
+            .ok_or_else(|| RefError {
+                input: s.to_string(),
+                reason: "unknown artifact kind (expected core, adapter, mlp, checkpoint or deploy)"
+                    .into(),
+            })
     }
 }
 
@@ -136,12 +146,16 @@ impl FromStr for LineageRole {
     type Err = RefError;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Self::ALL.into_iter().find(|k| k.as_str() == s).ok_or_else(|| RefError {
-            input: s.to_string(),
-            reason: "unknown lineage role (expected trained_against, frozen_core, from_checkpoint, \
+        Self::ALL
+            .into_iter()
+            .find(|k| k.as_str() == s)
+            .ok_or_else(|| RefError {
+                input: s.to_string(),
+                reason:
+                    "unknown lineage role (expected trained_against, frozen_core, from_checkpoint, \
                      initialised_from or derived_from)"
-                .into(),
-        })
+                        .into(),
+            })
     }
 }
 
@@ -173,16 +187,25 @@ pub struct ArtifactRef {
 
 impl ArtifactRef {
     pub fn version(name: &str, version: u64) -> Self {
-        Self { name: name.to_string(), selector: VersionSelector::Version(version) }
+        Self {
+            name: name.to_string(),
+            selector: VersionSelector::Version(version),
+        }
     }
 
     pub fn alias(name: &str, alias: &str) -> Self {
-        Self { name: name.to_string(), selector: VersionSelector::Alias(alias.to_string()) }
+        Self {
+            name: name.to_string(),
+            selector: VersionSelector::Alias(alias.to_string()),
+        }
     }
 
     /// Parse `name[@version|@vN|@alias]`.
     pub fn parse(input: &str) -> Result<Self, RefError> {
-        let fail = |reason: String| RefError { input: input.to_string(), reason };
+        let fail = |reason: String| RefError {
+            input: input.to_string(),
+            reason,
+        };
         let (name, selector) = match input.split_once('@') {
             Some((name, sel)) => (name, sel),
             None => (input, LATEST),
@@ -193,14 +216,22 @@ impl ArtifactRef {
         }
         let digits = selector.strip_prefix('v').unwrap_or(selector);
         if !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()) {
-            let version: u64 = digits.parse().map_err(|_| fail("version number out of range".into()))?;
+            let version: u64 = digits
+                .parse()
+                .map_err(|_| fail("version number out of range".into()))?;
             if version == 0 {
                 return Err(fail("versions start at 1".into()));
             }
-            return Ok(Self { name: name.to_string(), selector: VersionSelector::Version(version) });
+            return Ok(Self {
+                name: name.to_string(),
+                selector: VersionSelector::Version(version),
+            });
         }
         validate_alias(selector).map_err(|e| fail(e.reason))?;
-        Ok(Self { name: name.to_string(), selector: VersionSelector::Alias(selector.to_string()) })
+        Ok(Self {
+            name: name.to_string(),
+            selector: VersionSelector::Alias(selector.to_string()),
+        })
     }
 }
 
@@ -223,13 +254,20 @@ impl FromStr for ArtifactRef {
 
 /// Check an artifact name: a valid key segment (letters, digits, `-`, `_`, `.`, at most 64).
 pub fn validate_name(name: &str) -> Result<(), RefError> {
-    validate_segment("artifact", name)
-        .map_err(|e| RefError { input: name.to_string(), reason: e.reason.into() })
+    validate_segment("artifact", name).map_err(|e| RefError {
+        input: name.to_string(),
+        reason: e.reason.into(),
+    })
 }
 
 /// Check an alias: a valid key segment that does not look like a version number (`3`, `v3`).
 pub fn validate_alias(alias: &str) -> Result<(), RefError> {
-    let fail = |reason: &str| Err(RefError { input: alias.to_string(), reason: reason.into() });
+    let fail = |reason: &str| {
+        Err(RefError {
+            input: alias.to_string(),
+            reason: reason.into(),
+        })
+    };
     if let Err(e) = validate_segment("alias", alias) {
         return fail(e.reason);
     }
@@ -397,7 +435,10 @@ wire_message!(ListRequest, "registry list request");
 
 impl ListRequest {
     pub fn all() -> Self {
-        Self { wire_version: WIRE_VERSION, ..Self::default() }
+        Self {
+            wire_version: WIRE_VERSION,
+            ..Self::default()
+        }
     }
 }
 
@@ -422,7 +463,10 @@ wire_message!(RefRequest, "registry ref request");
 
 impl RefRequest {
     pub fn new(artifact: &str) -> Self {
-        Self { wire_version: WIRE_VERSION, artifact: artifact.to_string() }
+        Self {
+            wire_version: WIRE_VERSION,
+            artifact: artifact.to_string(),
+        }
     }
 }
 
@@ -559,7 +603,11 @@ wire_message!(ErrorReply, "registry error reply");
 
 impl ErrorReply {
     pub fn new(code: ErrorCode, message: impl Into<String>) -> Self {
-        Self { wire_version: WIRE_VERSION, code, message: message.into() }
+        Self {
+            wire_version: WIRE_VERSION,
+            code,
+            message: message.into(),
+        }
     }
 }
 
@@ -569,18 +617,48 @@ mod tests {
 
     #[test]
     fn refs_parse_versions_and_aliases() {
-        assert_eq!(ArtifactRef::parse("a1-core@3").unwrap(), ArtifactRef::version("a1-core", 3));
-        assert_eq!(ArtifactRef::parse("a1-core@v3").unwrap(), ArtifactRef::version("a1-core", 3));
-        assert_eq!(ArtifactRef::parse("a1-core@prod").unwrap(), ArtifactRef::alias("a1-core", "prod"));
-        assert_eq!(ArtifactRef::parse("a1-core").unwrap(), ArtifactRef::alias("a1-core", "latest"));
-        assert_eq!(ArtifactRef::parse("go1.adapter_2@latest").unwrap().to_string(), "go1.adapter_2@latest");
+        assert_eq!(
+            ArtifactRef::parse("a1-core@3").unwrap(),
+            ArtifactRef::version("a1-core", 3)
+        );
+        assert_eq!(
+            ArtifactRef::parse("a1-core@v3").unwrap(),
+            ArtifactRef::version("a1-core", 3)
+        );
+        assert_eq!(
+            ArtifactRef::parse("a1-core@prod").unwrap(),
+            ArtifactRef::alias("a1-core", "prod")
+        );
+        assert_eq!(
+            ArtifactRef::parse("a1-core").unwrap(),
+            ArtifactRef::alias("a1-core", "latest")
+        );
+        assert_eq!(
+            ArtifactRef::parse("go1.adapter_2@latest")
+                .unwrap()
+                .to_string(),
+            "go1.adapter_2@latest"
+        );
     }
 
     #[test]
     fn bad_refs_are_errors_with_a_hint() {
-        for bad in ["", "@3", "a@", "a@0", "a b@1", "a/b@1", "a@1@2", "a@*", "a@99999999999999999999999"] {
+        for bad in [
+            "",
+            "@3",
+            "a@",
+            "a@0",
+            "a b@1",
+            "a/b@1",
+            "a@1@2",
+            "a@*",
+            "a@99999999999999999999999",
+        ] {
             let err = ArtifactRef::parse(bad).unwrap_err().to_string();
-            assert!(err.contains("invalid artifact reference") && err.contains("hint:"), "{bad}: {err}");
+            assert!(
+                err.contains("invalid artifact reference") && err.contains("hint:"),
+                "{bad}: {err}"
+            );
         }
         assert!(validate_alias("v12").is_err());
         assert!(validate_alias("42").is_err());

@@ -49,7 +49,19 @@ fn meta() -> impl Strategy<Value = ArtifactMeta> {
         prop::collection::vec(name(), 0..3),
     )
         .prop_map(
-            |(name, version, kind, sha256, size, robot, dims, config, metrics, lineage, aliases)| {
+            |(
+                name,
+                version,
+                kind,
+                sha256,
+                size,
+                robot,
+                dims,
+                config,
+                metrics,
+                lineage,
+                aliases,
+            )| {
                 ArtifactMeta {
                     name,
                     version,
@@ -65,7 +77,12 @@ fn meta() -> impl Strategy<Value = ArtifactMeta> {
                     created_unix_ms: 1_795_000_000_000,
                     lineage: lineage
                         .into_iter()
-                        .map(|(role, name, version, sha256)| LineageEdge { role, name, version, sha256 })
+                        .map(|(role, name, version, sha256)| LineageEdge {
+                            role,
+                            name,
+                            version,
+                            sha256,
+                        })
                         .collect(),
                     aliases,
                 }
@@ -74,14 +91,23 @@ fn meta() -> impl Strategy<Value = ArtifactMeta> {
 }
 
 fn spec() -> impl Strategy<Value = ArtifactSpec> {
-    (name(), kind(), prop::option::of(name()), json_value(), prop::collection::vec((role(), name()), 0..3))
+    (
+        name(),
+        kind(),
+        prop::option::of(name()),
+        json_value(),
+        prop::collection::vec((role(), name()), 0..3),
+    )
         .prop_map(|(name, kind, robot, config, lineage)| {
             let mut spec = ArtifactSpec::new(&name, kind);
             spec.robot = robot;
             spec.config = config;
             spec.lineage = lineage
                 .into_iter()
-                .map(|(role, parent)| LineageInput { role, artifact: format!("{parent}@latest") })
+                .map(|(role, parent)| LineageInput {
+                    role,
+                    artifact: format!("{parent}@latest"),
+                })
                 .collect();
             spec.aliases = vec!["prod".into()];
             spec.dims = BTreeMap::from([("obs_dim".to_string(), 48)]);
@@ -101,7 +127,10 @@ where
     let mut value: serde_json::Value = serde_json::from_slice(&bytes).unwrap();
     value["wire_version"] = serde_json::json!(WIRE_VERSION + 1);
     let other = serde_json::to_vec(&value).unwrap();
-    assert!(matches!(codec::decode_json::<T>(&other), Err(CodecError::WrongVersion { .. })));
+    assert!(matches!(
+        codec::decode_json::<T>(&other),
+        Err(CodecError::WrongVersion { .. })
+    ));
 }
 
 proptest! {
@@ -157,7 +186,8 @@ proptest! {
 #[test]
 fn unknown_fields_are_refused() {
     let err =
-        codec::decode_json::<RefRequest>(br#"{"wire_version":1,"artifact":"a@1","extra":true}"#).unwrap_err();
+        codec::decode_json::<RefRequest>(br#"{"wire_version":1,"artifact":"a@1","extra":true}"#)
+            .unwrap_err();
     assert!(err.to_string().contains("unknown field"), "{err}");
 }
 
@@ -172,5 +202,9 @@ fn enums_are_snake_case_strings() {
         version: 2,
         sha256: "00".into(),
     };
-    assert!(serde_json::to_string(&edge).unwrap().contains(r#""role":"frozen_core""#));
+    assert!(
+        serde_json::to_string(&edge)
+            .unwrap()
+            .contains(r#""role":"frozen_core""#)
+    );
 }

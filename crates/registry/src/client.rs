@@ -8,14 +8,17 @@ use l3p_proto::codec;
 use l3p_proto::keys;
 use l3p_proto::registry::{
     AliasEvent, ArtifactMeta, ErrorCode, ErrorReply, HistoryReply, HistoryRequest, LineageGraph,
-    LineageReply, ListReply, ListRequest, MetaReply, PutHeader, PutReply, RefRequest, TagReply, TagRequest,
+    LineageReply, ListReply, ListRequest, MetaReply, PutHeader, PutReply, RefRequest, TagReply,
+    TagRequest,
 };
 use l3p_proto::{WIRE_VERSION, WireMessage};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
 use crate::error::RegistryError;
-use crate::store::{CoreCheck, ListFilter, PutOutcome, PutRequest, TagOutcome, check_core, sha256_hex};
+use crate::store::{
+    CoreCheck, ListFilter, PutOutcome, PutRequest, TagOutcome, check_core, sha256_hex,
+};
 
 /// Client of the registry service. Cheap to clone (the Zenoh session is shared).
 #[derive(Clone)]
@@ -60,9 +63,14 @@ impl RegistryClient {
             spec: req.spec,
         };
         let header = codec::encode_json(&header)?;
-        let (payload, _) = self.query("put", req.bytes, Some(header), self.blob_timeout).await?;
+        let (payload, _) = self
+            .query("put", req.bytes, Some(header), self.blob_timeout)
+            .await?;
         let reply: PutReply = decode("put", &payload)?;
-        Ok(PutOutcome { meta: reply.artifact, created: reply.created })
+        Ok(PutOutcome {
+            meta: reply.artifact,
+            created: reply.created,
+        })
     }
 
     /// Metadata of `reference` (`name@version|alias`).
@@ -72,7 +80,10 @@ impl RegistryClient {
     }
 
     /// Metadata and bytes of `reference`, the bytes checked against the metadata's sha256 and size.
-    pub async fn get_blob(&self, reference: &str) -> Result<(ArtifactMeta, Vec<u8>), RegistryError> {
+    pub async fn get_blob(
+        &self,
+        reference: &str,
+    ) -> Result<(ArtifactMeta, Vec<u8>), RegistryError> {
         let request = codec::encode_json(&RefRequest::new(reference))?;
         let (bytes, attachment) = self.query("pull", request, None, self.blob_timeout).await?;
         let key = keys::registry("pull");
@@ -127,7 +138,10 @@ impl RegistryClient {
             alias: alias.to_string(),
         };
         let reply: TagReply = self.call("tag", &request).await?;
-        Ok(TagOutcome { event: reply.event, moved: reply.moved })
+        Ok(TagOutcome {
+            event: reply.event,
+            moved: reply.moved,
+        })
     }
 
     /// Recorded moves of one alias of `name` (all aliases when `None`), oldest first.
@@ -182,7 +196,10 @@ impl RegistryClient {
         timeout: Duration,
     ) -> Result<(Vec<u8>, Option<Vec<u8>>), RegistryError> {
         let key = keys::registry(op);
-        let zenoh_err = |e: zenoh::Error| RegistryError::Zenoh { key: key.clone(), message: e.to_string() };
+        let zenoh_err = |e: zenoh::Error| RegistryError::Zenoh {
+            key: key.clone(),
+            message: e.to_string(),
+        };
         let get = self.session.get(&key).payload(payload).timeout(timeout);
         let replies = match attachment {
             Some(attachment) => get.attachment(attachment).await,
@@ -201,14 +218,20 @@ impl RegistryClient {
             Err(error) => {
                 let bytes = error.payload().to_bytes();
                 match codec::decode_json::<ErrorReply>(&bytes) {
-                    Ok(reply) => Err(RegistryError::Remote { code: reply.code, message: reply.message }),
+                    Ok(reply) => Err(RegistryError::Remote {
+                        code: reply.code,
+                        message: reply.message,
+                    }),
                     // Zenoh's own error replies (e.g. "Timeout") are plain strings.
                     Err(_) => {
                         let text = String::from_utf8_lossy(&bytes).into_owned();
                         if text.eq_ignore_ascii_case("timeout") {
                             Err(RegistryError::NoReply { key, timeout })
                         } else {
-                            Err(RegistryError::Remote { code: ErrorCode::Internal, message: text })
+                            Err(RegistryError::Remote {
+                                code: ErrorCode::Internal,
+                                message: text,
+                            })
                         }
                     }
                 }
@@ -218,6 +241,8 @@ impl RegistryClient {
 }
 
 fn decode<T: DeserializeOwned + WireMessage>(op: &str, bytes: &[u8]) -> Result<T, RegistryError> {
-    codec::decode_json(bytes)
-        .map_err(|e| RegistryError::BadReply { key: keys::registry(op), message: e.to_string() })
+    codec::decode_json(bytes).map_err(|e| RegistryError::BadReply {
+        key: keys::registry(op),
+        message: e.to_string(),
+    })
 }

@@ -25,7 +25,11 @@ pub enum RegistryError {
     #[error(
         "registry database {path} has schema version {found}, newer than this build's {supported}\nhint: use a newer l3p"
     )]
-    SchemaTooNew { path: PathBuf, found: i64, supported: i64 },
+    SchemaTooNew {
+        path: PathBuf,
+        found: i64,
+        supported: i64,
+    },
     #[error("registry database error while {context}: {source}")]
     Sqlite {
         context: &'static str,
@@ -37,9 +41,17 @@ pub enum RegistryError {
     #[error("artifact {name:?} not found\nhint: `l3p registry list` shows what is stored")]
     UnknownName { name: String },
     #[error("{name} has no version {version} (latest is {latest})")]
-    UnknownVersion { name: String, version: u64, latest: u64 },
+    UnknownVersion {
+        name: String,
+        version: u64,
+        latest: u64,
+    },
     #[error("{name} has no alias {alias:?} (aliases: {known})")]
-    UnknownAlias { name: String, alias: String, known: String },
+    UnknownAlias {
+        name: String,
+        alias: String,
+        known: String,
+    },
     #[error(
         "registry database holds an unreadable {what}: {message}\nhint: restore registry.db from a backup"
     )]
@@ -49,17 +61,29 @@ pub enum RegistryError {
     #[error("invalid artifact: {0}")]
     Invalid(String),
     #[error("{name} holds {existing} artifacts, cannot store a {requested} under the same name")]
-    KindMismatch { name: String, existing: String, requested: String },
+    KindMismatch {
+        name: String,
+        existing: String,
+        requested: String,
+    },
     #[error("{what} of {len} bytes exceeds the limit of {limit} bytes")]
     TooLarge { what: String, len: u64, limit: u64 },
     #[error(
         "integrity check failed for {what}: expected sha256 {expected}, got {actual}\nhint: the bytes were corrupted in transit or on disk; retry, or restore registry.db from a backup"
     )]
-    Integrity { what: String, expected: String, actual: String },
+    Integrity {
+        what: String,
+        expected: String,
+        actual: String,
+    },
     #[error(
         "adapter {adapter} was trained against {expected_core} but is being loaded with {given_core}\nhint: load it with {expected_core}, or override with --allow-core-mismatch"
     )]
-    CoreMismatch { adapter: String, expected_core: String, given_core: String },
+    CoreMismatch {
+        adapter: String,
+        expected_core: String,
+        given_core: String,
+    },
     #[error(
         "{adapter} records no core in its lineage, so it cannot be checked against {given_core}\nhint: override with --allow-core-mismatch"
     )]

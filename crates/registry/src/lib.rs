@@ -22,11 +22,11 @@ mod store;
 pub use client::RegistryClient;
 pub use error::RegistryError;
 pub use l3p_proto::registry::{
-    AliasEvent, ArtifactKind, ArtifactMeta, ArtifactRef, ArtifactSpec, ErrorCode, LATEST, LineageEdge,
-    LineageGraph, LineageInput, LineageLink, LineageRole, VersionSelector,
+    AliasEvent, ArtifactKind, ArtifactMeta, ArtifactRef, ArtifactSpec, ErrorCode, LATEST,
+    LineageEdge, LineageGraph, LineageInput, LineageLink, LineageRole, VersionSelector,
 };
 pub use service::{ServiceLimits, serve, serve_with};
 pub use store::{
-    CoreCheck, DB_FILE, IntegrityReport, ListFilter, MAX_BLOB_BYTES, PutOutcome, PutRequest, Registry,
-    TagOutcome, check_core, sha256_hex,
+    CoreCheck, DB_FILE, IntegrityReport, ListFilter, MAX_BLOB_BYTES, PutOutcome, PutRequest,
+    Registry, TagOutcome, check_core, sha256_hex,
 };

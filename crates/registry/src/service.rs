@@ -14,8 +14,8 @@ use std::sync::Arc;
 use l3p_proto::codec;
 use l3p_proto::keys;
 use l3p_proto::registry::{
-    ErrorCode, ErrorReply, HistoryReply, HistoryRequest, LineageReply, ListReply, ListRequest, MetaReply,
-    OPS, PutHeader, PutReply, RefRequest, TagReply, TagRequest,
+    ErrorCode, ErrorReply, HistoryReply, HistoryRequest, LineageReply, ListReply, ListRequest,
+    MetaReply, OPS, PutHeader, PutReply, RefRequest, TagReply, TagRequest,
 };
 use l3p_proto::{WIRE_VERSION, WireMessage};
 use serde::Serialize;
@@ -40,7 +40,11 @@ pub struct ServiceLimits {
 
 impl Default for ServiceLimits {
     fn default() -> Self {
-        Self { max_request_bytes: 64 << 10, max_blob_bytes: codec::MAX_MESSAGE_BYTES, max_in_flight: 16 }
+        Self {
+            max_request_bytes: 64 << 10,
+            max_blob_bytes: codec::MAX_MESSAGE_BYTES,
+            max_in_flight: 16,
+        }
     }
 }
 
@@ -64,7 +68,10 @@ pub async fn serve_with(
     let queryable = session
         .declare_queryable(&key)
         .await
-        .map_err(|e| RegistryError::Zenoh { key: key.clone(), message: e.to_string() })?;
+        .map_err(|e| RegistryError::Zenoh {
+            key: key.clone(),
+            message: e.to_string(),
+        })?;
     tracing::info!(%key, db = %registry.path().display(), "registry service ready");
     let permits = Arc::new(Semaphore::new(limits.max_in_flight.max(1)));
     loop {
@@ -104,11 +111,17 @@ enum Answer {
 
 async fn answer(query: Query, registry: Arc<Registry>, limits: ServiceLimits) {
     let key = query.key_expr().clone();
-    let op = key.as_str().strip_prefix(&keys::registry("")).unwrap_or("").to_string();
+    let op = key
+        .as_str()
+        .strip_prefix(&keys::registry(""))
+        .unwrap_or("")
+        .to_string();
     let outcome = match read_request(&query, &op, &limits) {
         Ok((payload, attachment)) => {
             let op = op.clone();
-            match tokio::task::spawn_blocking(move || handle(&registry, &op, payload, attachment)).await {
+            match tokio::task::spawn_blocking(move || handle(&registry, &op, payload, attachment))
+                .await
+            {
                 Ok(outcome) => outcome,
                 Err(e) => Err(RegistryError::BadReply {
                     key: key.to_string(),
@@ -119,7 +132,12 @@ async fn answer(query: Query, registry: Arc<Registry>, limits: ServiceLimits) {
         Err(e) => Err(e),
     };
     let sent = match outcome {
-        Ok(Answer::Json(bytes)) => query.reply(key.clone(), bytes).encoding(Encoding::APPLICATION_JSON).await,
+        Ok(Answer::Json(bytes)) => {
+            query
+                .reply(key.clone(), bytes)
+                .encoding(Encoding::APPLICATION_JSON)
+                .await
+        }
         Ok(Answer::Blob { header, bytes }) => {
             query
                 .reply(key.clone(), bytes)
@@ -135,8 +153,12 @@ async fn answer(query: Query, registry: Arc<Registry>, limits: ServiceLimits) {
                 tracing::debug!(%op, %error, "registry request refused");
             }
             let reply = ErrorReply::new(code, error.to_string());
-            let bytes = codec::encode_json(&reply).unwrap_or_else(|_| error.to_string().into_bytes());
-            query.reply_err(bytes).encoding(Encoding::APPLICATION_JSON).await
+            let bytes =
+                codec::encode_json(&reply).unwrap_or_else(|_| error.to_string().into_bytes());
+            query
+                .reply_err(bytes)
+                .encoding(Encoding::APPLICATION_JSON)
+                .await
         }
     };
     if let Err(e) = sent {
@@ -162,12 +184,19 @@ fn read_request(
             return Err(too_large("blob", payload_len, limits.max_blob_bytes));
         }
         if attachment_len > limits.max_request_bytes {
-            return Err(too_large("header", attachment_len, limits.max_request_bytes));
+            return Err(too_large(
+                "header",
+                attachment_len,
+                limits.max_request_bytes,
+            ));
         }
     } else if payload_len > limits.max_request_bytes {
         return Err(too_large("payload", payload_len, limits.max_request_bytes));
     }
-    let payload = query.payload().map(|p| p.to_bytes().into_owned()).unwrap_or_default();
+    let payload = query
+        .payload()
+        .map(|p| p.to_bytes().into_owned())
+        .unwrap_or_default();
     let attachment = query.attachment().map(|a| a.to_bytes().into_owned());
     Ok((payload, attachment))
 }
@@ -200,28 +229,50 @@ fn handle(
     let ref_example = format!(r#"{{"wire_version":{v},"artifact":"a1-core@latest"}}"#);
     match op {
         "list" => {
-            let req: ListRequest =
-                if payload.is_empty() { ListRequest::all() } else { codec::decode_json(&payload)? };
-            let filter = ListFilter { kind: req.kind, name: req.name, robot: req.robot };
-            json(&ListReply { wire_version: v, artifacts: registry.list(&filter)? })
+            let req: ListRequest = if payload.is_empty() {
+                ListRequest::all()
+            } else {
+                codec::decode_json(&payload)?
+            };
+            let filter = ListFilter {
+                kind: req.kind,
+                name: req.name,
+                robot: req.robot,
+            };
+            json(&ListReply {
+                wire_version: v,
+                artifacts: registry.list(&filter)?,
+            })
         }
         "show" => {
             let req: RefRequest = request(op, &payload, &ref_example)?;
-            json(&MetaReply { wire_version: v, artifact: registry.get_meta(&req.artifact)? })
+            json(&MetaReply {
+                wire_version: v,
+                artifact: registry.get_meta(&req.artifact)?,
+            })
         }
         "pull" => {
             let req: RefRequest = request(op, &payload, &ref_example)?;
             let (artifact, bytes) = registry.get_blob(&req.artifact)?;
-            let header = codec::encode_json(&MetaReply { wire_version: v, artifact })?;
+            let header = codec::encode_json(&MetaReply {
+                wire_version: v,
+                artifact,
+            })?;
             Ok(Answer::Blob { header, bytes })
         }
         "lineage" => {
             let req: RefRequest = request(op, &payload, &ref_example)?;
-            json(&LineageReply { wire_version: v, lineage: registry.lineage(&req.artifact)? })
+            json(&LineageReply {
+                wire_version: v,
+                lineage: registry.lineage(&req.artifact)?,
+            })
         }
         "history" => {
-            let req: HistoryRequest =
-                request(op, &payload, &format!(r#"{{"wire_version":{v},"name":"a1-core","alias":"prod"}}"#))?;
+            let req: HistoryRequest = request(
+                op,
+                &payload,
+                &format!(r#"{{"wire_version":{v},"name":"a1-core","alias":"prod"}}"#),
+            )?;
             json(&HistoryReply {
                 wire_version: v,
                 events: registry.alias_history(&req.name, req.alias.as_deref())?,
@@ -234,12 +285,17 @@ fn handle(
                 &format!(r#"{{"wire_version":{v},"artifact":"a1-core@3","alias":"prod"}}"#),
             )?;
             let outcome = registry.tag(&req.artifact, &req.alias)?;
-            json(&TagReply { wire_version: v, event: outcome.event, moved: outcome.moved })
+            json(&TagReply {
+                wire_version: v,
+                event: outcome.event,
+                moved: outcome.moved,
+            })
         }
         "put" => {
             let Some(header) = attachment else {
                 return Err(RegistryError::BadRequest(
-                    "`put` needs a JSON PutHeader in the query attachment and the blob as payload".into(),
+                    "`put` needs a JSON PutHeader in the query attachment and the blob as payload"
+                        .into(),
                 ));
             };
             let header: PutHeader = codec::decode_json(&header)?;
@@ -260,7 +316,11 @@ fn handle(
                 bytes: payload,
                 expected_sha256: Some(header.sha256),
             })?;
-            json(&PutReply { wire_version: v, artifact: outcome.meta, created: outcome.created })
+            json(&PutReply {
+                wire_version: v,
+                artifact: outcome.meta,
+                created: outcome.created,
+            })
         }
         other => Err(RegistryError::BadRequest(format!(
             "unknown registry operation {other:?}\nhint: query {} with one of: {}",

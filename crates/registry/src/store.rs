@@ -22,8 +22,9 @@ use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use l3p_proto::registry::{
-    AliasEvent, ArtifactKind, ArtifactMeta, ArtifactRef, ArtifactSpec, LATEST, LineageEdge, LineageGraph,
-    LineageInput, LineageLink, LineageRole, VersionSelector, validate_alias, validate_name,
+    AliasEvent, ArtifactKind, ArtifactMeta, ArtifactRef, ArtifactSpec, LATEST, LineageEdge,
+    LineageGraph, LineageInput, LineageLink, LineageRole, VersionSelector, validate_alias,
+    validate_name,
 };
 use rusqlite::{Connection, OpenFlags, OptionalExtension, TransactionBehavior, params};
 use serde::{Deserialize, Serialize};
@@ -122,7 +123,11 @@ pub struct PutRequest {
 
 impl PutRequest {
     pub fn new(name: &str, kind: ArtifactKind, bytes: Vec<u8>) -> Self {
-        Self { spec: ArtifactSpec::new(name, kind), bytes, expected_sha256: None }
+        Self {
+            spec: ArtifactSpec::new(name, kind),
+            bytes,
+            expected_sha256: None,
+        }
     }
 
     pub fn robot(mut self, robot: &str) -> Self {
@@ -157,7 +162,10 @@ impl PutRequest {
 
     /// Record a dependency (`artifact` is `name@version|alias`, resolved at put time).
     pub fn lineage(mut self, role: LineageRole, artifact: &str) -> Self {
-        self.spec.lineage.push(LineageInput { role, artifact: artifact.to_string() });
+        self.spec.lineage.push(LineageInput {
+            role,
+            artifact: artifact.to_string(),
+        });
         self
     }
 
@@ -238,7 +246,9 @@ pub struct Registry {
 
 impl std::fmt::Debug for Registry {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Registry").field("path", &self.path).finish_non_exhaustive()
+        f.debug_struct("Registry")
+            .field("path", &self.path)
+            .finish_non_exhaustive()
     }
 }
 
@@ -248,40 +258,64 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 }
 
 fn now_ms() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map(|d| d.as_millis() as u64).unwrap_or(0)
+    SystemTime::now()
+        .duration_since(UNIX_EPOCH)
+        .map(|d| d.as_millis() as u64)
+        .unwrap_or(0)
 }
 
 impl Registry {
     /// Open (creating if needed) the registry in `dir` (`dir/registry.db`).
     pub fn open(dir: &Path) -> Result<Self, RegistryError> {
-        std::fs::create_dir_all(dir)
-            .map_err(|source| RegistryError::Dir { path: dir.to_path_buf(), source })?;
+        std::fs::create_dir_all(dir).map_err(|source| RegistryError::Dir {
+            path: dir.to_path_buf(),
+            source,
+        })?;
         let path = dir.join(DB_FILE);
-        let open_err = |source| RegistryError::Open { path: path.clone(), source };
+        let open_err = |source| RegistryError::Open {
+            path: path.clone(),
+            source,
+        };
         let flags = OpenFlags::SQLITE_OPEN_READ_WRITE
             | OpenFlags::SQLITE_OPEN_CREATE
             | OpenFlags::SQLITE_OPEN_NO_MUTEX;
         let mut conn = Connection::open_with_flags(&path, flags).map_err(open_err)?;
         conn.busy_timeout(BUSY_TIMEOUT).map_err(open_err)?;
-        let mode: String =
-            conn.query_row("PRAGMA journal_mode=WAL", [], |row| row.get(0)).map_err(open_err)?;
+        let mode: String = conn
+            .query_row("PRAGMA journal_mode=WAL", [], |row| row.get(0))
+            .map_err(open_err)?;
         if !mode.eq_ignore_ascii_case("wal") {
             tracing::warn!(path = %path.display(), mode, "registry database is not in WAL mode");
         }
-        conn.pragma_update(None, "synchronous", "FULL").map_err(open_err)?;
-        conn.pragma_update(None, "foreign_keys", "ON").map_err(open_err)?;
-        let tx = conn.transaction_with_behavior(TransactionBehavior::Immediate).map_err(open_err)?;
-        let found: i64 = tx.query_row("PRAGMA user_version", [], |row| row.get(0)).map_err(open_err)?;
+        conn.pragma_update(None, "synchronous", "FULL")
+            .map_err(open_err)?;
+        conn.pragma_update(None, "foreign_keys", "ON")
+            .map_err(open_err)?;
+        let tx = conn
+            .transaction_with_behavior(TransactionBehavior::Immediate)
+            .map_err(open_err)?;
+        let found: i64 = tx
+            .query_row("PRAGMA user_version", [], |row| row.get(0))
+            .map_err(open_err)?;
         if found > SCHEMA_VERSION {
-            return Err(RegistryError::SchemaTooNew { path, found, supported: SCHEMA_VERSION });
+            return Err(RegistryError::SchemaTooNew {
+                path,
+                found,
+                supported: SCHEMA_VERSION,
+            });
         }
         if found < SCHEMA_VERSION {
             tx.execute_batch(SCHEMA).map_err(open_err)?;
-            tx.pragma_update(None, "user_version", SCHEMA_VERSION).map_err(open_err)?;
+            tx.pragma_update(None, "user_version", SCHEMA_VERSION)
+                .map_err(open_err)?;
         }
         tx.commit().map_err(open_err)?;
         tracing::debug!(path = %path.display(), "registry opened");
-        Ok(Self { conn: Mutex::new(conn), path, before_commit: None })
+        Ok(Self {
+            conn: Mutex::new(conn),
+            path,
+            before_commit: None,
+        })
     }
 
     /// Path of the database file.
@@ -299,12 +333,18 @@ impl Registry {
     fn lock(&self) -> MutexGuard<'_, Connection> {
         // A panic while holding the lock cannot leave a transaction open (rusqlite rolls back on
         // drop), so a poisoned connection is still consistent.
-        self.conn.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+        self.conn
+            .lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
     }
 
     /// Store a new immutable version of `req.spec.name` (see [`PutOutcome`] for deduplication).
     pub fn put(&self, req: PutRequest) -> Result<PutOutcome, RegistryError> {
-        let PutRequest { spec, bytes, expected_sha256 } = req;
+        let PutRequest {
+            spec,
+            bytes,
+            expected_sha256,
+        } = req;
         let lineage = validate_spec(&spec)?;
         let size = bytes.len() as u64;
         if size > MAX_BLOB_BYTES {
@@ -331,8 +371,9 @@ impl Registry {
             producer: spec.producer.clone(),
             extra: spec.extra.clone(),
         };
-        let meta_json = serde_json::to_string(&stored)
-            .map_err(|e| RegistryError::Invalid(format!("metadata of {} is not JSON: {e}", spec.name)))?;
+        let meta_json = serde_json::to_string(&stored).map_err(|e| {
+            RegistryError::Invalid(format!("metadata of {} is not JSON: {e}", spec.name))
+        })?;
 
         let mut conn = self.lock();
         let tx = conn
@@ -341,7 +382,11 @@ impl Registry {
         let now = now_ms();
         let name = spec.name.as_str();
         let existing_kind: Option<String> = tx
-            .query_row("SELECT kind FROM artifacts WHERE name = ?1", [name], |row| row.get(0))
+            .query_row(
+                "SELECT kind FROM artifacts WHERE name = ?1",
+                [name],
+                |row| row.get(0),
+            )
             .optional()
             .map_err(sql("reading the artifact kind"))?;
         match existing_kind {
@@ -379,7 +424,10 @@ impl Registry {
             let meta = load_meta(&tx, name, version)?;
             tx.commit().map_err(sql("committing alias moves"))?;
             tracing::info!(artifact = %meta.reference(), "put deduplicated: identical content already stored");
-            return Ok(PutOutcome { meta, created: false });
+            return Ok(PutOutcome {
+                meta,
+                created: false,
+            });
         }
 
         let mut edges = Vec::with_capacity(lineage.len());
@@ -414,9 +462,11 @@ impl Registry {
         }
 
         let next: i64 = tx
-            .query_row("SELECT COALESCE(MAX(version), 0) + 1 FROM versions WHERE name = ?1", [name], |row| {
-                row.get(0)
-            })
+            .query_row(
+                "SELECT COALESCE(MAX(version), 0) + 1 FROM versions WHERE name = ?1",
+                [name],
+                |row| row.get(0),
+            )
             .map_err(sql("numbering the new version"))?;
         let version = next as u64;
         tx.execute(
@@ -448,7 +498,10 @@ impl Registry {
         }
         tx.commit().map_err(sql("committing the new version"))?;
         tracing::info!(artifact = %meta.reference(), kind = %meta.kind, size, sha256 = %meta.sha256, "stored");
-        Ok(PutOutcome { meta, created: true })
+        Ok(PutOutcome {
+            meta,
+            created: true,
+        })
     }
 
     /// Metadata of the version `reference` (`name@version|alias`) resolves to.
@@ -463,11 +516,17 @@ impl Registry {
     pub fn get_blob(&self, reference: &str) -> Result<(ArtifactMeta, Vec<u8>), RegistryError> {
         let parsed = ArtifactRef::parse(reference)?;
         let mut conn = self.lock();
-        let tx = conn.transaction().map_err(sql("starting a read transaction"))?;
+        let tx = conn
+            .transaction()
+            .map_err(sql("starting a read transaction"))?;
         let version = resolve(&tx, &parsed)?;
         let meta = load_meta(&tx, &parsed.name, version)?;
         let bytes: Vec<u8> = tx
-            .query_row("SELECT data FROM blobs WHERE sha256 = ?1", [&meta.sha256], |row| row.get(0))
+            .query_row(
+                "SELECT data FROM blobs WHERE sha256 = ?1",
+                [&meta.sha256],
+                |row| row.get(0),
+            )
             .map_err(sql("reading the blob"))?;
         tx.finish().map_err(sql("ending a read transaction"))?;
         drop(conn);
@@ -493,13 +552,16 @@ impl Registry {
             )
             .map_err(sql("listing versions"))?;
         let rows = stmt
-            .query_map(params![filter.kind.map(|k| k.as_str()), filter.name, filter.robot], |row| {
-                Ok((row.get::<_, String>(0)?, row.get::<_, i64>(1)?))
-            })
+            .query_map(
+                params![filter.kind.map(|k| k.as_str()), filter.name, filter.robot],
+                |row| Ok((row.get::<_, String>(0)?, row.get::<_, i64>(1)?)),
+            )
             .map_err(sql("listing versions"))?
             .collect::<Result<Vec<_>, _>>()
             .map_err(sql("listing versions"))?;
-        rows.into_iter().map(|(name, version)| load_meta(&conn, &name, version as u64)).collect()
+        rows.into_iter()
+            .map(|(name, version)| load_meta(&conn, &name, version as u64))
+            .collect()
     }
 
     /// Point `alias` of the artifact's name at the version `reference` resolves to. `latest` is
@@ -526,7 +588,11 @@ impl Registry {
     }
 
     /// Every recorded move of `alias` of `name` (all aliases when `None`), oldest first.
-    pub fn alias_history(&self, name: &str, alias: Option<&str>) -> Result<Vec<AliasEvent>, RegistryError> {
+    pub fn alias_history(
+        &self,
+        name: &str,
+        alias: Option<&str>,
+    ) -> Result<Vec<AliasEvent>, RegistryError> {
         validate_name(name)?;
         let conn = self.lock();
         ensure_name(&conn, name)?;
@@ -561,7 +627,11 @@ impl Registry {
         let start = (parsed.name.clone(), version);
         let upstream = walk(&conn, &start, Direction::Up)?;
         let downstream = walk(&conn, &start, Direction::Down)?;
-        Ok(LineageGraph { artifact, upstream, downstream })
+        Ok(LineageGraph {
+            artifact,
+            upstream,
+            downstream,
+        })
     }
 
     /// Check that the adapter `adapter_ref` may be loaded with the core `core_ref` (see [`check_core`]).
@@ -579,13 +649,17 @@ impl Registry {
     /// `PRAGMA integrity_check` plus a re-hash of every blob.
     pub fn check_integrity(&self) -> Result<IntegrityReport, RegistryError> {
         let conn = self.lock();
-        let mut stmt = conn.prepare("PRAGMA integrity_check").map_err(sql("checking integrity"))?;
+        let mut stmt = conn
+            .prepare("PRAGMA integrity_check")
+            .map_err(sql("checking integrity"))?;
         let sqlite = stmt
             .query_map([], |row| row.get::<_, String>(0))
             .map_err(sql("checking integrity"))?
             .collect::<Result<Vec<_>, _>>()
             .map_err(sql("checking integrity"))?;
-        let mut stmt = conn.prepare("SELECT sha256, data FROM blobs").map_err(sql("checking blobs"))?;
+        let mut stmt = conn
+            .prepare("SELECT sha256, data FROM blobs")
+            .map_err(sql("checking blobs"))?;
         let mut rows = stmt.query([]).map_err(sql("checking blobs"))?;
         let (mut blobs_checked, mut bad_blobs) = (0, Vec::new());
         while let Some(row) = rows.next().map_err(sql("checking blobs"))? {
@@ -596,7 +670,11 @@ impl Registry {
                 bad_blobs.push(sha);
             }
         }
-        Ok(IntegrityReport { sqlite, blobs_checked, bad_blobs })
+        Ok(IntegrityReport {
+            sqlite,
+            blobs_checked,
+            bad_blobs,
+        })
     }
 }
 
@@ -609,24 +687,41 @@ pub fn check_core(
     allow_mismatch: bool,
 ) -> Result<CoreCheck, RegistryError> {
     if core.kind != ArtifactKind::Core {
-        return Err(RegistryError::Invalid(format!("{} is a {}, not a core", core.reference(), core.kind)));
+        return Err(RegistryError::Invalid(format!(
+            "{} is a {}, not a core",
+            core.reference(),
+            core.kind
+        )));
     }
     let error = match adapter.core_edge() {
         Some(edge)
-            if edge.name == core.name && edge.version == core.version && edge.sha256 == core.sha256 =>
+            if edge.name == core.name
+                && edge.version == core.version
+                && edge.sha256 == core.sha256 =>
         {
-            return Ok(CoreCheck { adapter, core, matches: true });
+            return Ok(CoreCheck {
+                adapter,
+                core,
+                matches: true,
+            });
         }
         Some(edge) => RegistryError::CoreMismatch {
             adapter: adapter.reference(),
             expected_core: edge.reference(),
             given_core: core.reference(),
         },
-        None => RegistryError::NoCoreLineage { adapter: adapter.reference(), given_core: core.reference() },
+        None => RegistryError::NoCoreLineage {
+            adapter: adapter.reference(),
+            given_core: core.reference(),
+        },
     };
     if allow_mismatch {
         tracing::warn!("{error} (allowed by override)");
-        Ok(CoreCheck { adapter, core, matches: false })
+        Ok(CoreCheck {
+            adapter,
+            core,
+            matches: false,
+        })
     } else {
         Err(error)
     }
@@ -635,7 +730,8 @@ pub fn check_core(
 /// Validate what a writer sent; returns the parsed lineage references.
 fn validate_spec(spec: &ArtifactSpec) -> Result<Vec<(LineageRole, ArtifactRef)>, RegistryError> {
     validate_name(&spec.name)?;
-    let invalid = |message: String| Err(RegistryError::Invalid(format!("{}: {message}", spec.name)));
+    let invalid =
+        |message: String| Err(RegistryError::Invalid(format!("{}: {message}", spec.name)));
     match &spec.robot {
         Some(robot) => {
             if let Err(e) = l3p_proto::keys::validate_segment("robot", robot) {
@@ -673,12 +769,16 @@ fn validate_spec(spec: &ArtifactSpec) -> Result<Vec<(LineageRole, ArtifactRef)>,
 
 fn ensure_name(conn: &Connection, name: &str) -> Result<(), RegistryError> {
     let exists: Option<i64> = conn
-        .query_row("SELECT 1 FROM artifacts WHERE name = ?1", [name], |row| row.get(0))
+        .query_row("SELECT 1 FROM artifacts WHERE name = ?1", [name], |row| {
+            row.get(0)
+        })
         .optional()
         .map_err(sql("looking up a name"))?;
     match exists {
         Some(_) => Ok(()),
-        None => Err(RegistryError::UnknownName { name: name.to_string() }),
+        None => Err(RegistryError::UnknownName {
+            name: name.to_string(),
+        }),
     }
 }
 
@@ -688,10 +788,16 @@ fn resolve(conn: &Connection, reference: &ArtifactRef) -> Result<u64, RegistryEr
     match &reference.selector {
         VersionSelector::Version(version) => {
             let latest: Option<i64> = conn
-                .query_row("SELECT MAX(version) FROM versions WHERE name = ?1", [name], |row| row.get(0))
+                .query_row(
+                    "SELECT MAX(version) FROM versions WHERE name = ?1",
+                    [name],
+                    |row| row.get(0),
+                )
                 .map_err(sql("resolving a version"))?;
             match latest {
-                None => Err(RegistryError::UnknownName { name: name.to_string() }),
+                None => Err(RegistryError::UnknownName {
+                    name: name.to_string(),
+                }),
                 Some(latest) if *version > latest as u64 => Err(RegistryError::UnknownVersion {
                     name: name.to_string(),
                     version: *version,
@@ -750,8 +856,13 @@ fn set_alias(
         .optional()
         .map_err(sql("reading an alias"))?;
     let previous = previous.map(|v| v as u64);
-    let event =
-        AliasEvent { name: name.to_string(), alias: alias.to_string(), version, previous, unix_ms: now };
+    let event = AliasEvent {
+        name: name.to_string(),
+        alias: alias.to_string(),
+        version,
+        previous,
+        unix_ms: now,
+    };
     if previous == Some(version) {
         return Ok((event, false));
     }
@@ -770,7 +881,10 @@ fn set_alias(
 }
 
 fn corrupt(what: &str, message: impl std::fmt::Display) -> RegistryError {
-    RegistryError::Corrupt { what: what.to_string(), message: message.to_string() }
+    RegistryError::Corrupt {
+        what: what.to_string(),
+        message: message.to_string(),
+    }
 }
 
 /// Read one version's metadata, lineage and current aliases.
@@ -793,12 +907,18 @@ fn load_meta(conn: &Connection, name: &str, version: u64) -> Result<ArtifactMeta
         .optional()
         .map_err(sql("reading a version"))?;
     let Some((kind, sha256, size, robot, meta_json, created)) = row else {
-        return Err(RegistryError::UnknownVersion { name: name.to_string(), version, latest: 0 });
+        return Err(RegistryError::UnknownVersion {
+            name: name.to_string(),
+            version,
+            latest: 0,
+        });
     };
     let reference = format!("{name}@{version}");
-    let kind: ArtifactKind = kind.parse().map_err(|e| corrupt(&format!("kind of {reference}"), e))?;
-    let stored: StoredMeta =
-        serde_json::from_str(&meta_json).map_err(|e| corrupt(&format!("metadata of {reference}"), e))?;
+    let kind: ArtifactKind = kind
+        .parse()
+        .map_err(|e| corrupt(&format!("kind of {reference}"), e))?;
+    let stored: StoredMeta = serde_json::from_str(&meta_json)
+        .map_err(|e| corrupt(&format!("metadata of {reference}"), e))?;
     let mut stmt = conn
         .prepare(
             "SELECT role, parent_name, parent_version, parent_sha256 FROM lineage
@@ -820,8 +940,15 @@ fn load_meta(conn: &Connection, name: &str, version: u64) -> Result<ArtifactMeta
     let lineage = raw
         .into_iter()
         .map(|(role, parent, parent_version, sha)| {
-            let role = role.parse().map_err(|e| corrupt(&format!("lineage of {reference}"), e))?;
-            Ok(LineageEdge { role, name: parent, version: parent_version as u64, sha256: sha })
+            let role = role
+                .parse()
+                .map_err(|e| corrupt(&format!("lineage of {reference}"), e))?;
+            Ok(LineageEdge {
+                role,
+                name: parent,
+                version: parent_version as u64,
+                sha256: sha,
+            })
         })
         .collect::<Result<Vec<_>, RegistryError>>()?;
     let mut stmt = conn

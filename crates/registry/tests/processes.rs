@@ -19,7 +19,13 @@ const MARK: &str = "L3P-CHILD";
 
 fn spawn_child(role: &str, dir: &Path) -> Child {
     Command::new(std::env::current_exe().unwrap())
-        .args(["child", "--exact", "--ignored", "--nocapture", "--test-threads=1"])
+        .args([
+            "child",
+            "--exact",
+            "--ignored",
+            "--nocapture",
+            "--test-threads=1",
+        ])
         .env(CHILD_ENV, role)
         .env(DIR_ENV, dir)
         .stdout(Stdio::piped())
@@ -35,7 +41,10 @@ fn marked_lines(child: &mut Child) -> impl Iterator<Item = String> + use<> {
         .lines()
         .map_while(Result::ok)
         // libtest prints `test child ... ` without a newline before the first line of the body.
-        .filter_map(|line| line.find(MARK).map(|at| line[at + MARK.len()..].trim().to_string()))
+        .filter_map(|line| {
+            line.find(MARK)
+                .map(|at| line[at + MARK.len()..].trim().to_string())
+        })
 }
 
 fn blob(writer: &str, i: usize, len: usize) -> Vec<u8> {
@@ -49,27 +58,41 @@ fn concurrent_writers_never_lose_or_duplicate_a_version() {
     const PER_WRITER: usize = 15;
     let dir = tempfile::tempdir().unwrap();
     Registry::open(dir.path()).unwrap();
-    let mut children: Vec<Child> =
-        ["writer-a", "writer-b"].iter().map(|role| spawn_child(role, dir.path())).collect();
+    let mut children: Vec<Child> = ["writer-a", "writer-b"]
+        .iter()
+        .map(|role| spawn_child(role, dir.path()))
+        .collect();
     // Release both writers at once so that their puts interleave.
     std::fs::write(dir.path().join("go"), b"").unwrap();
     let mut claimed: Vec<Vec<u64>> = Vec::new();
     for child in &mut children {
-        let versions: Vec<u64> =
-            marked_lines(child).filter_map(|l| l.strip_prefix("put ").and_then(|v| v.parse().ok())).collect();
+        let versions: Vec<u64> = marked_lines(child)
+            .filter_map(|l| l.strip_prefix("put ").and_then(|v| v.parse().ok()))
+            .collect();
         assert!(child.wait().unwrap().success());
         assert_eq!(versions.len(), PER_WRITER);
         claimed.push(versions);
     }
 
     let reg = Registry::open(dir.path()).unwrap();
-    let all = reg.list(&ListFilter { name: Some("shared-ckpt".into()), ..Default::default() }).unwrap();
+    let all = reg
+        .list(&ListFilter {
+            name: Some("shared-ckpt".into()),
+            ..Default::default()
+        })
+        .unwrap();
     let numbers: Vec<u64> = all.iter().map(|m| m.version).collect();
     let expected: Vec<u64> = (1..=2 * PER_WRITER as u64).collect();
-    assert_eq!(numbers, expected, "versions must be exactly 1..=30, no gap, no duplicate");
+    assert_eq!(
+        numbers, expected,
+        "versions must be exactly 1..=30, no gap, no duplicate"
+    );
     let a: BTreeSet<u64> = claimed[0].iter().copied().collect();
     let b: BTreeSet<u64> = claimed[1].iter().copied().collect();
-    assert!(a.is_disjoint(&b), "two writers were given the same version: {a:?} {b:?}");
+    assert!(
+        a.is_disjoint(&b),
+        "two writers were given the same version: {a:?} {b:?}"
+    );
     assert_eq!(a.union(&b).copied().collect::<Vec<_>>(), expected);
     // Every write is there with its own bytes.
     for (writer, versions) in ["writer-a", "writer-b"].iter().zip(&claimed) {
@@ -80,7 +103,10 @@ fn concurrent_writers_never_lose_or_duplicate_a_version() {
         }
     }
     let latest = reg.alias_history("shared-ckpt", Some("latest")).unwrap();
-    assert_eq!(latest.iter().map(|e| e.version).collect::<Vec<_>>(), expected);
+    assert_eq!(
+        latest.iter().map(|e| e.version).collect::<Vec<_>>(),
+        expected
+    );
     assert!(reg.check_integrity().unwrap().is_ok());
 }
 
@@ -102,14 +128,28 @@ fn a_writer_killed_inside_its_transaction_leaves_no_trace() {
     let reg = Registry::open(dir.path()).unwrap();
     let report = reg.check_integrity().unwrap();
     assert!(report.is_ok(), "{report:?}");
-    assert_eq!(report.blobs_checked, 1, "the partial version's blob must be absent");
-    let versions: Vec<u64> = reg.list(&ListFilter::default()).unwrap().iter().map(|m| m.version).collect();
+    assert_eq!(
+        report.blobs_checked, 1,
+        "the partial version's blob must be absent"
+    );
+    let versions: Vec<u64> = reg
+        .list(&ListFilter::default())
+        .unwrap()
+        .iter()
+        .map(|m| m.version)
+        .collect();
     assert_eq!(versions, [1]);
     assert_eq!(reg.get_meta("crash@latest").unwrap().version, 1);
     assert_eq!(reg.alias_history("crash", None).unwrap().len(), 1);
     assert!(reg.get_meta("crash@2").unwrap_err().is_not_found());
     // The database is writable again and the number of the lost put is reused.
-    let next = reg.put(PutRequest::new("crash", ArtifactKind::Checkpoint, b"after".to_vec())).unwrap();
+    let next = reg
+        .put(PutRequest::new(
+            "crash",
+            ArtifactKind::Checkpoint,
+            b"after".to_vec(),
+        ))
+        .unwrap();
     assert_eq!(next.meta.version, 2);
 }
 
@@ -129,7 +169,10 @@ fn a_writer_killed_at_a_random_moment_leaves_a_valid_database() {
         }
     }
     // Somewhere in the next put (they take a few ms each with 1 MB blobs and synchronous=FULL).
-    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().subsec_nanos();
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .unwrap()
+        .subsec_nanos();
     std::thread::sleep(Duration::from_micros(500 + u64::from(nanos % 20_000)));
     child.kill().unwrap();
     child.wait().unwrap();
@@ -139,13 +182,19 @@ fn a_writer_killed_at_a_random_moment_leaves_a_valid_database() {
     assert!(reg.check_integrity().unwrap().is_ok());
     let all = reg.list(&ListFilter::default()).unwrap();
     let numbers: Vec<u64> = all.iter().map(|m| m.version).collect();
-    assert!(numbers.len() as u64 >= committed, "a reported commit was lost: {numbers:?} < {committed}");
+    assert!(
+        numbers.len() as u64 >= committed,
+        "a reported commit was lost: {numbers:?} < {committed}"
+    );
     assert_eq!(numbers, (1..=numbers.len() as u64).collect::<Vec<_>>());
     for meta in &all {
         let (_, bytes) = reg.get_blob(&meta.reference()).unwrap();
         assert_eq!(bytes, blob("loop", meta.version as usize, 1 << 20));
     }
-    assert_eq!(reg.get_meta("looped@latest").unwrap().version, numbers.len() as u64);
+    assert_eq!(
+        reg.get_meta("looped@latest").unwrap().version,
+        numbers.len() as u64
+    );
 }
 
 /// Child process body (run only through `spawn_child`).
@@ -166,8 +215,12 @@ fn child() {
             }
             let reg = Registry::open(&dir).unwrap();
             for i in 0..15 {
-                let req = PutRequest::new("shared-ckpt", ArtifactKind::Checkpoint, blob(&role, i, 4096))
-                    .producer(&role);
+                let req = PutRequest::new(
+                    "shared-ckpt",
+                    ArtifactKind::Checkpoint,
+                    blob(&role, i, 4096),
+                )
+                .producer(&role);
                 let outcome = reg.put(req).unwrap();
                 assert!(outcome.created);
                 println!("{MARK} put {}", outcome.meta.version);
@@ -175,8 +228,13 @@ fn child() {
         }
         "killed-in-commit" => {
             let mut reg = Registry::open(&dir).unwrap();
-            let first =
-                reg.put(PutRequest::new("crash", ArtifactKind::Checkpoint, b"before".to_vec())).unwrap();
+            let first = reg
+                .put(PutRequest::new(
+                    "crash",
+                    ArtifactKind::Checkpoint,
+                    b"before".to_vec(),
+                ))
+                .unwrap();
             println!("{MARK} committed {}", first.meta.version);
             reg.set_before_commit_hook(|meta| {
                 use std::io::Write;
@@ -185,13 +243,19 @@ fn child() {
                 std::thread::sleep(Duration::from_secs(120));
             });
             // 8 MB: larger than SQLite's page cache, so uncommitted pages reach the WAL file.
-            reg.put(PutRequest::new("crash", ArtifactKind::Checkpoint, vec![7u8; 8 << 20])).unwrap();
+            reg.put(PutRequest::new(
+                "crash",
+                ArtifactKind::Checkpoint,
+                vec![7u8; 8 << 20],
+            ))
+            .unwrap();
             unreachable!("the parent kills this process before the commit");
         }
         "writer-loop" => {
             let reg = Registry::open(&dir).unwrap();
             for i in 1.. {
-                let req = PutRequest::new("looped", ArtifactKind::Checkpoint, blob("loop", i, 1 << 20));
+                let req =
+                    PutRequest::new("looped", ArtifactKind::Checkpoint, blob("loop", i, 1 << 20));
                 let outcome = reg.put(req).unwrap();
                 println!("{MARK} put {}", outcome.meta.version);
             }

@@ -32,7 +32,11 @@ with zenoh.open(conf) as session:
 "#;
 
 fn python_with_zenoh() -> bool {
-    Command::new("python3").args(["-c", "import zenoh"]).output().map(|o| o.status.success()).unwrap_or(false)
+    Command::new("python3")
+        .args(["-c", "import zenoh"])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false)
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -43,13 +47,29 @@ async fn python_eclipse_zenoh_client_reads_the_registry() {
     }
     let dir = tempfile::tempdir().unwrap();
     let registry = Arc::new(Registry::open(dir.path()).unwrap());
-    let v1 = registry.put(PutRequest::new("a1-core", ArtifactKind::Core, b"core one".to_vec())).unwrap();
-    let v2 = registry.put(PutRequest::new("a1-core", ArtifactKind::Core, b"core two".to_vec())).unwrap();
+    let v1 = registry
+        .put(PutRequest::new(
+            "a1-core",
+            ArtifactKind::Core,
+            b"core one".to_vec(),
+        ))
+        .unwrap();
+    let v2 = registry
+        .put(PutRequest::new(
+            "a1-core",
+            ArtifactKind::Core,
+            b"core two".to_vec(),
+        ))
+        .unwrap();
     registry.tag("a1-core@1", "prod").unwrap();
-    registry.put(PutRequest::new("go1-adapter", ArtifactKind::Adapter, b"a".to_vec()).robot("go1")).unwrap();
+    registry
+        .put(PutRequest::new("go1-adapter", ArtifactKind::Adapter, b"a".to_vec()).robot("go1"))
+        .unwrap();
 
     let port = free_loopback_port().unwrap();
-    let session = open_session(&ZenohSettings::loopback(Some(port), &[])).await.unwrap();
+    let session = open_session(&ZenohSettings::loopback(Some(port), &[]))
+        .await
+        .unwrap();
     let cancel = CancellationToken::new();
     let server = tokio::spawn({
         let cancel = cancel.clone();
@@ -60,12 +80,20 @@ async fn python_eclipse_zenoh_client_reads_the_registry() {
     let script = dir.path().join("client.py");
     std::fs::write(&script, SCRIPT).unwrap();
     let output = tokio::task::spawn_blocking(move || {
-        Command::new("python3").arg(&script).arg(format!("tcp/127.0.0.1:{port}")).output().unwrap()
+        Command::new("python3")
+            .arg(&script)
+            .arg(format!("tcp/127.0.0.1:{port}"))
+            .output()
+            .unwrap()
     })
     .await
     .unwrap();
     let stdout = String::from_utf8_lossy(&output.stdout);
-    assert!(output.status.success(), "python failed: {stdout}\n{}", String::from_utf8_lossy(&output.stderr));
+    assert!(
+        output.status.success(),
+        "python failed: {stdout}\n{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
     let lines: Vec<&str> = stdout.lines().collect();
     assert_eq!(
         lines,

@@ -32,15 +32,25 @@ fn versions_are_numbered_immutable_and_deduplicated() {
     assert_eq!(v2.meta.version, 2);
 
     // The same bytes again under the same name: the existing version comes back, nothing new.
-    let again = reg.put(core(b"weights one").metric("mean_reward", 99.0)).unwrap();
+    let again = reg
+        .put(core(b"weights one").metric("mean_reward", 99.0))
+        .unwrap();
     assert!(!again.created);
     assert_eq!(again.meta.version, 1);
-    assert_eq!(again.meta.metrics["mean_reward"], 12.5, "a duplicate put must not rewrite metadata");
+    assert_eq!(
+        again.meta.metrics["mean_reward"], 12.5,
+        "a duplicate put must not rewrite metadata"
+    );
     assert_eq!(reg.list(&ListFilter::default()).unwrap().len(), 2);
 
     // The same bytes under another name: a new version that shares the blob row.
-    let other =
-        reg.put(PutRequest::new("a1-core-copy", ArtifactKind::Core, b"weights one".to_vec())).unwrap();
+    let other = reg
+        .put(PutRequest::new(
+            "a1-core-copy",
+            ArtifactKind::Core,
+            b"weights one".to_vec(),
+        ))
+        .unwrap();
     assert!(other.created);
     assert_eq!(other.meta.version, 1);
     assert_eq!(reg.check_integrity().unwrap().blobs_checked, 2);
@@ -55,7 +65,9 @@ fn versions_are_numbered_immutable_and_deduplicated() {
 
     // Immutability is enforced by the database itself, not only by the API.
     let raw = rusqlite::Connection::open(reg.path()).unwrap();
-    let err = raw.execute("UPDATE versions SET size = 0 WHERE name = 'a1-core'", []).unwrap_err();
+    let err = raw
+        .execute("UPDATE versions SET size = 0 WHERE name = 'a1-core'", [])
+        .unwrap_err();
     assert!(err.to_string().contains("immutable"), "{err}");
     let err = raw.execute("DELETE FROM versions", []).unwrap_err();
     assert!(err.to_string().contains("immutable"), "{err}");
@@ -95,19 +107,34 @@ fn aliases_move_and_keep_their_history() {
     assert_eq!(back.event.previous, Some(3));
 
     assert_eq!(reg.get_meta("a1-core@prod").unwrap().version, 2);
-    let prod: Vec<_> =
-        reg.alias_history("a1-core", Some("prod")).unwrap().iter().map(|e| (e.version, e.previous)).collect();
+    let prod: Vec<_> = reg
+        .alias_history("a1-core", Some("prod"))
+        .unwrap()
+        .iter()
+        .map(|e| (e.version, e.previous))
+        .collect();
     assert_eq!(prod, [(1, None), (3, Some(1)), (2, Some(3))]);
-    let latest: Vec<_> =
-        reg.alias_history("a1-core", Some("latest")).unwrap().iter().map(|e| e.version).collect();
-    assert_eq!(latest, [1, 2, 3], "latest moves on every put and its moves are recorded too");
+    let latest: Vec<_> = reg
+        .alias_history("a1-core", Some("latest"))
+        .unwrap()
+        .iter()
+        .map(|e| e.version)
+        .collect();
+    assert_eq!(
+        latest,
+        [1, 2, 3],
+        "latest moves on every put and its moves are recorded too"
+    );
     assert_eq!(reg.alias_history("a1-core", None).unwrap().len(), 3 + 3 + 1);
     let meta = reg.get_meta("a1-core@3").unwrap();
     assert_eq!(meta.aliases, ["latest", "staging"]);
 
     // A put can set aliases too.
     let v4 = reg.put(core(b"4").alias("prod")).unwrap();
-    assert_eq!(reg.get_meta("a1-core@prod").unwrap().version, v4.meta.version);
+    assert_eq!(
+        reg.get_meta("a1-core@prod").unwrap().version,
+        v4.meta.version
+    );
 
     // `latest` is the registry's, and aliases cannot look like versions.
     let err = reg.tag("a1-core@1", "latest").unwrap_err().to_string();
@@ -128,12 +155,23 @@ fn unknown_references_name_what_exists() {
     assert!(err.to_string().contains("\"go1-core\" not found"), "{err}");
     let err = reg.get_meta("a1-core@7").unwrap_err();
     assert!(err.is_not_found());
-    assert!(err.to_string().contains("no version 7 (latest is 1)"), "{err}");
+    assert!(
+        err.to_string().contains("no version 7 (latest is 1)"),
+        "{err}"
+    );
     let err = reg.get_blob("a1-core@beta").unwrap_err();
-    assert!(err.to_string().contains("no alias \"beta\" (aliases: latest, prod)"), "{err}");
+    assert!(
+        err.to_string()
+            .contains("no alias \"beta\" (aliases: latest, prod)"),
+        "{err}"
+    );
     let err = reg.get_meta("a1 core@1").unwrap_err();
     assert!(matches!(err, RegistryError::BadRef(_)), "{err}");
-    assert!(reg.alias_history("nothing", None).unwrap_err().is_not_found());
+    assert!(
+        reg.alias_history("nothing", None)
+            .unwrap_err()
+            .is_not_found()
+    );
 }
 
 #[test]
@@ -142,10 +180,17 @@ fn invalid_puts_are_refused_and_store_nothing() {
     let reg = Registry::open(dir.path()).unwrap();
     reg.put(core(b"x")).unwrap();
 
-    let err =
-        reg.put(PutRequest::new("a1-core", ArtifactKind::Adapter, b"y".to_vec()).robot("a1")).unwrap_err();
+    let err = reg
+        .put(PutRequest::new("a1-core", ArtifactKind::Adapter, b"y".to_vec()).robot("a1"))
+        .unwrap_err();
     assert!(err.to_string().contains("holds core artifacts"), "{err}");
-    let err = reg.put(PutRequest::new("go1-adapter", ArtifactKind::Adapter, b"y".to_vec())).unwrap_err();
+    let err = reg
+        .put(PutRequest::new(
+            "go1-adapter",
+            ArtifactKind::Adapter,
+            b"y".to_vec(),
+        ))
+        .unwrap_err();
     assert!(err.to_string().contains("must name its robot"), "{err}");
     let err = reg.put(core(b"z").metric("kl", f64::NAN)).unwrap_err();
     assert!(err.to_string().contains("finite"), "{err}");
@@ -153,13 +198,19 @@ fn invalid_puts_are_refused_and_store_nothing() {
     tampered.expected_sha256 = Some(sha256_hex(b"something else"));
     let err = reg.put(tampered).unwrap_err();
     assert!(matches!(err, RegistryError::Integrity { .. }), "{err}");
-    let err = reg.put(core(b"z").lineage(LineageRole::TrainedAgainst, "missing-core@1")).unwrap_err();
+    let err = reg
+        .put(core(b"z").lineage(LineageRole::TrainedAgainst, "missing-core@1"))
+        .unwrap_err();
     assert!(err.is_not_found(), "{err}");
     let err = reg.put(core(b"z").alias("latest")).unwrap_err();
     assert!(err.to_string().contains("latest"), "{err}");
 
     assert_eq!(reg.list(&ListFilter::default()).unwrap().len(), 1);
-    assert_eq!(reg.put(core(b"z")).unwrap().meta.version, 2, "refused puts must not use up version numbers");
+    assert_eq!(
+        reg.put(core(b"z")).unwrap().meta.version,
+        2,
+        "refused puts must not use up version numbers"
+    );
 }
 
 #[test]
@@ -170,9 +221,13 @@ fn lineage_links_adapters_checkpoints_and_cores() {
     reg.put(core(b"core v2")).unwrap();
     let ckpt = reg
         .put(
-            PutRequest::new("go1-transfer-ckpt", ArtifactKind::Checkpoint, b"ckpt".to_vec())
-                .robot("go1")
-                .lineage(LineageRole::FrozenCore, "a1-core@latest"),
+            PutRequest::new(
+                "go1-transfer-ckpt",
+                ArtifactKind::Checkpoint,
+                b"ckpt".to_vec(),
+            )
+            .robot("go1")
+            .lineage(LineageRole::FrozenCore, "a1-core@latest"),
         )
         .unwrap();
     // `latest` was resolved at put time: the edge names version 2, even after the alias moves.
@@ -198,14 +253,22 @@ fn lineage_links_adapters_checkpoints_and_cores() {
     assert_eq!(deploy.meta.lineage.len(), 2);
 
     let graph = reg.lineage("go1-deploy@1").unwrap();
-    let up: Vec<_> = graph.upstream.iter().map(|l| (l.child.as_str(), l.role, l.parent.as_str())).collect();
+    let up: Vec<_> = graph
+        .upstream
+        .iter()
+        .map(|l| (l.child.as_str(), l.role, l.parent.as_str()))
+        .collect();
     assert_eq!(
         up,
         [
             ("go1-deploy@1", LineageRole::DerivedFrom, "go1-adapter@1"),
             ("go1-deploy@1", LineageRole::DerivedFrom, "a1-core@2"),
             ("go1-adapter@1", LineageRole::TrainedAgainst, "a1-core@2"),
-            ("go1-adapter@1", LineageRole::FromCheckpoint, "go1-transfer-ckpt@1"),
+            (
+                "go1-adapter@1",
+                LineageRole::FromCheckpoint,
+                "go1-transfer-ckpt@1"
+            ),
             ("go1-transfer-ckpt@1", LineageRole::FrozenCore, "a1-core@2"),
         ]
     );
@@ -216,7 +279,10 @@ fn lineage_links_adapters_checkpoints_and_cores() {
     let mut children: Vec<_> = graph.downstream.iter().map(|l| l.child.as_str()).collect();
     children.sort();
     children.dedup();
-    assert_eq!(children, ["go1-adapter@1", "go1-deploy@1", "go1-transfer-ckpt@1"]);
+    assert_eq!(
+        children,
+        ["go1-adapter@1", "go1-deploy@1", "go1-transfer-ckpt@1"]
+    );
     assert!(reg.lineage("a1-core@1").unwrap().downstream.is_empty());
 
     // Role constraints: a core role must name a core, a checkpoint role a checkpoint.
@@ -227,7 +293,10 @@ fn lineage_links_adapters_checkpoints_and_cores() {
                 .lineage(LineageRole::TrainedAgainst, "go1-adapter@1"),
         )
         .unwrap_err();
-    assert!(err.to_string().contains("must name a core artifact"), "{err}");
+    assert!(
+        err.to_string().contains("must name a core artifact"),
+        "{err}"
+    );
     assert_eq!(adapter.meta.core_edge().unwrap().reference(), "a1-core@2");
 }
 
@@ -243,23 +312,35 @@ fn adapters_must_be_loaded_with_their_core() {
             .lineage(LineageRole::TrainedAgainst, "a1-core@1"),
     )
     .unwrap();
-    reg.put(PutRequest::new("orphan-adapter", ArtifactKind::Adapter, b"orphan".to_vec()).robot("go1"))
-        .unwrap();
+    reg.put(
+        PutRequest::new("orphan-adapter", ArtifactKind::Adapter, b"orphan".to_vec()).robot("go1"),
+    )
+    .unwrap();
 
-    let ok = reg.check_adapter_against_core("go1-adapter@latest", "a1-core@1", false).unwrap();
+    let ok = reg
+        .check_adapter_against_core("go1-adapter@latest", "a1-core@1", false)
+        .unwrap();
     assert!(ok.matches);
-    let err = reg.check_adapter_against_core("go1-adapter@1", "a1-core@latest", false).unwrap_err();
+    let err = reg
+        .check_adapter_against_core("go1-adapter@1", "a1-core@latest", false)
+        .unwrap_err();
     let text = err.to_string();
     assert!(
         text.contains("go1-adapter@1") && text.contains("a1-core@1") && text.contains("a1-core@2"),
         "{text}"
     );
     assert!(text.contains("--allow-core-mismatch"), "{text}");
-    let allowed = reg.check_adapter_against_core("go1-adapter@1", "a1-core@2", true).unwrap();
+    let allowed = reg
+        .check_adapter_against_core("go1-adapter@1", "a1-core@2", true)
+        .unwrap();
     assert!(!allowed.matches);
-    let err = reg.check_adapter_against_core("orphan-adapter@1", "a1-core@2", false).unwrap_err();
+    let err = reg
+        .check_adapter_against_core("orphan-adapter@1", "a1-core@2", false)
+        .unwrap_err();
     assert!(err.to_string().contains("records no core"), "{err}");
-    let err = reg.check_adapter_against_core("go1-adapter@1", "go1-adapter@1", true).unwrap_err();
+    let err = reg
+        .check_adapter_against_core("go1-adapter@1", "go1-adapter@1", true)
+        .unwrap_err();
     assert!(err.to_string().contains("not a core"), "{err}");
 }
 
@@ -293,26 +374,57 @@ fn list_filters_by_kind_name_and_robot() {
     let dir = tempfile::tempdir().unwrap();
     let reg = Registry::open(dir.path()).unwrap();
     reg.put(core(b"c")).unwrap();
-    reg.put(PutRequest::new("go1-adapter", ArtifactKind::Adapter, b"g".to_vec()).robot("go1")).unwrap();
-    reg.put(PutRequest::new("go1-adapter", ArtifactKind::Adapter, b"g2".to_vec()).robot("go1")).unwrap();
-    reg.put(PutRequest::new("anymal-adapter", ArtifactKind::Adapter, b"a".to_vec()).robot("anymal_c"))
+    reg.put(PutRequest::new("go1-adapter", ArtifactKind::Adapter, b"g".to_vec()).robot("go1"))
         .unwrap();
+    reg.put(PutRequest::new("go1-adapter", ArtifactKind::Adapter, b"g2".to_vec()).robot("go1"))
+        .unwrap();
+    reg.put(
+        PutRequest::new("anymal-adapter", ArtifactKind::Adapter, b"a".to_vec()).robot("anymal_c"),
+    )
+    .unwrap();
 
     let names = |filter: ListFilter| -> Vec<String> {
-        reg.list(&filter).unwrap().iter().map(|m| m.reference()).collect()
+        reg.list(&filter)
+            .unwrap()
+            .iter()
+            .map(|m| m.reference())
+            .collect()
     };
     assert_eq!(
         names(ListFilter::default()),
-        ["a1-core@1", "anymal-adapter@1", "go1-adapter@1", "go1-adapter@2"]
+        [
+            "a1-core@1",
+            "anymal-adapter@1",
+            "go1-adapter@1",
+            "go1-adapter@2"
+        ]
     );
     assert_eq!(
-        names(ListFilter { kind: Some(ArtifactKind::Adapter), ..Default::default() }),
+        names(ListFilter {
+            kind: Some(ArtifactKind::Adapter),
+            ..Default::default()
+        }),
         ["anymal-adapter@1", "go1-adapter@1", "go1-adapter@2"]
     );
     assert_eq!(
-        names(ListFilter { robot: Some("go1".into()), ..Default::default() }),
+        names(ListFilter {
+            robot: Some("go1".into()),
+            ..Default::default()
+        }),
         ["go1-adapter@1", "go1-adapter@2"]
     );
-    assert_eq!(names(ListFilter { name: Some("a1-core".into()), ..Default::default() }), ["a1-core@1"]);
-    assert!(names(ListFilter { kind: Some(ArtifactKind::Deploy), ..Default::default() }).is_empty());
+    assert_eq!(
+        names(ListFilter {
+            name: Some("a1-core".into()),
+            ..Default::default()
+        }),
+        ["a1-core@1"]
+    );
+    assert!(
+        names(ListFilter {
+            kind: Some(ArtifactKind::Deploy),
+            ..Default::default()
+        })
+        .is_empty()
+    );
 }
