@@ -155,7 +155,8 @@ struct Shared {
     decimation: usize,
     spawn_clearance: f32,
     default_pose: [f32; NUM_JOINTS],
-    ground: Option<rapier3d::prelude::SharedShape>,
+    /// Heightfield blocks and their poses (`None` on flat ground).
+    ground: Option<Vec<(rapier3d::prelude::SharedShape, Pose)>>,
 }
 
 /// N envs of one robot, stepped in parallel.
@@ -201,7 +202,11 @@ fn exploded(s: &RobotState) -> bool {
 fn build_world(shared: &Shared, n: usize, origins: &[[f32; 3]]) -> Result<SimWorld, VecEnvError> {
     let mut sim = SimWorld::new(shared.sim_cfg);
     match &shared.ground {
-        Some(shape) => sim.add_ground_shape(shape.clone(), ground_pose(&shared.terrain)),
+        Some(blocks) => {
+            for (shape, pose) in blocks {
+                sim.add_ground_shape(shape.clone(), *pose);
+            }
+        }
         None => sim.add_flat_ground(0.0),
     }
     for o in origins.iter().take(n) {
@@ -215,15 +220,6 @@ fn build_world(shared: &Shared, n: usize, origins: &[[f32; 3]]) -> Result<SimWor
         )?;
     }
     Ok(sim)
-}
-
-fn ground_pose(t: &Terrain) -> Pose {
-    let sx = (t.nx.max(2) - 1) as f32 * t.resolution;
-    let sy = (t.ny.max(2) - 1) as f32 * t.resolution;
-    Pose::from_parts(
-        Vec3::new(t.x0 + 0.5 * sx, t.y0 + 0.5 * sy, 0.0),
-        Rot3::from_rotation_x(std::f32::consts::FRAC_PI_2),
-    )
 }
 
 impl VecEnv {
@@ -270,7 +266,7 @@ impl VecEnv {
         };
         let terrain = Terrain::generate(&task_spec.terrain)?;
         let task = Task::new(task_spec, params)?;
-        let ground = (!terrain.is_flat()).then(|| terrain_shape(&terrain));
+        let ground = (!terrain.is_flat()).then(|| terrain_blocks(&terrain, GROUND_BLOCK));
         let standing = model.standing_height(&spec.model_order_pose(&model, &spec.default_pose));
         let mut rng = SmallRng::seed_from_u64(seed);
         let curriculum = Curriculum::new(num_envs, &task.spec.terrain, &mut rng);
@@ -528,17 +524,45 @@ impl VecEnv {
     }
 }
 
-fn terrain_shape(t: &Terrain) -> rapier3d::prelude::SharedShape {
+/// Samples per side of one heightfield block (blocks share their edge samples).
+const GROUND_BLOCK: usize = 16;
+
+/// Splits the terrain grid into `block × block`-cell heightfields. One global heightfield has an
+/// AABB spanning the whole terrain's height range, so every robot collider would always be in a
+/// narrow-phase pair with it; blocks keep the AABBs tight (see NOTES.md, benchmarks).
+fn terrain_blocks(t: &Terrain, block: usize) -> Vec<(rapier3d::prelude::SharedShape, Pose)> {
     let (nx, ny) = (t.nx, t.ny);
-    let mut m = rapier3d::parry::utils::Array2::zeros(ny, nx);
-    for iy in 0..ny {
-        for ix in 0..nx {
-            m[(ny - 1 - iy, ix)] = t.heights[iy * nx + ix];
+    let mut out = Vec::new();
+    let mut x_start = 0;
+    while x_start + 1 < nx {
+        let x_end = (x_start + block).min(nx - 1);
+        let mut y_start = 0;
+        while y_start + 1 < ny {
+            let y_end = (y_start + block).min(ny - 1);
+            let (bx, by) = (x_end - x_start + 1, y_end - y_start + 1);
+            let mut m = rapier3d::parry::utils::Array2::zeros(by, bx);
+            for iy in 0..by {
+                for ix in 0..bx {
+                    m[(by - 1 - iy, ix)] = t.heights[(y_start + iy) * nx + x_start + ix];
+                }
+            }
+            let sx = (bx - 1) as f32 * t.resolution;
+            let sy = (by - 1) as f32 * t.resolution;
+            let centre = Vec3::new(
+                t.x0 + x_start as f32 * t.resolution + 0.5 * sx,
+                t.y0 + y_start as f32 * t.resolution + 0.5 * sy,
+                0.0,
+            );
+            let pose = Pose::from_parts(centre, Rot3::from_rotation_x(std::f32::consts::FRAC_PI_2));
+            out.push((
+                rapier3d::prelude::SharedShape::heightfield(m, Vec3::new(sx, 1.0, sy)),
+                pose,
+            ));
+            y_start = y_end;
         }
+        x_start = x_end;
     }
-    let sx = (nx - 1) as f32 * t.resolution;
-    let sy = (ny - 1) as f32 * t.resolution;
-    rapier3d::prelude::SharedShape::heightfield(m, Vec3::new(sx, 1.0, sy))
+    out
 }
 
 fn physics_and_rewards(shared: &Shared, w: &mut Worker, actions: &[f32]) {
