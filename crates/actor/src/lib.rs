@@ -325,7 +325,8 @@ pub async fn run<E: RolloutEnv>(
         ad,
     ));
     let mut policy: Option<(u64, DeployPolicy)> = None;
-    let mut last_collected: Option<u64> = None;
+    // (learner incarnation, policy version) of the last chunk sent.
+    let mut last_collected: Option<(u64, u64)> = None;
     let mut seq = 0u64;
     info!(robot = %opts.robot, actor = %opts.actor_id, envs = n, "actor ready, waiting for a policy");
 
@@ -333,8 +334,8 @@ pub async fn run<E: RolloutEnv>(
         if opts.max_chunks > 0 && seq >= opts.max_chunks {
             break;
         }
-        // The newest announce queued. Versions only grow while a learner lives; an announce older
-        // than the last one collected means the learner restarted from a checkpoint: follow it.
+        // The newest announce queued; collect once per (learner incarnation, version), so a learner
+        // restarted from a checkpoint is followed even to a version collected before.
         let sample = tokio::select! {
             _ = cancel.cancelled() => break,
             sample = announces.recv_async() => match sample { Ok(s) => s, Err(_) => break },
@@ -350,7 +351,7 @@ pub async fn run<E: RolloutEnv>(
                 continue;
             }
         };
-        if last_collected == Some(announce.version) {
+        if last_collected == Some((announce.incarnation, announce.version)) {
             continue;
         }
         let fetch_start = Instant::now();
@@ -435,7 +436,7 @@ pub async fn run<E: RolloutEnv>(
         if let Ok(json) = codec::encode_json(&record) {
             let _ = session.put(&metrics_key, json).await;
         }
-        last_collected = Some(version);
+        last_collected = Some((announce.incarnation, version));
         seq += 1;
         collector = Some(col);
         chunk = Some(ch);

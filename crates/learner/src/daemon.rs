@@ -557,10 +557,12 @@ pub async fn run(
     let mut last_checkpoint = ppo.iteration();
     let max_iterations = opts.daemon.max_iterations;
     let mut tick = tokio::time::interval(Duration::from_millis(500));
+    let incarnation = unix_ms();
     let announce = |version: u64, weights: &Vec<RobotWeights>| PolicyAnnounce {
         wire_version: WIRE_VERSION,
         run: run.clone(),
         version,
+        incarnation,
         mode: opts.ppo.mode.as_str().to_string(),
         robots: weights.clone(),
         max_policy_lag: opts.daemon.max_policy_lag,

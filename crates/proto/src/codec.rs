@@ -31,11 +31,19 @@ fn config() -> bincode::config::Configuration<
 #[derive(Debug, thiserror::Error)]
 pub enum CodecError {
     #[error("{what}: message of {len} bytes exceeds the limit of {limit} bytes")]
-    TooLarge { what: &'static str, len: usize, limit: usize },
+    TooLarge {
+        what: &'static str,
+        len: usize,
+        limit: usize,
+    },
     #[error(
         "{what}: wire version {got} but this build speaks {expected}\nhint: run the same l3p version on every process"
     )]
-    WrongVersion { what: &'static str, got: u32, expected: u32 },
+    WrongVersion {
+        what: &'static str,
+        got: u32,
+        expected: u32,
+    },
     #[error("{what}: malformed binary message: {source}")]
     Decode {
         what: &'static str,
@@ -60,10 +68,17 @@ pub enum CodecError {
 
 /// Encode a binary message.
 pub fn encode<T: Serialize + WireMessage>(message: &T) -> Result<Vec<u8>, CodecError> {
-    let bytes = bincode::serde::encode_to_vec(message, config())
-        .map_err(|source| CodecError::Encode { what: T::NAME, source })?;
+    let bytes =
+        bincode::serde::encode_to_vec(message, config()).map_err(|source| CodecError::Encode {
+            what: T::NAME,
+            source,
+        })?;
     if bytes.len() > MAX_MESSAGE_BYTES {
-        return Err(CodecError::TooLarge { what: T::NAME, len: bytes.len(), limit: MAX_MESSAGE_BYTES });
+        return Err(CodecError::TooLarge {
+            what: T::NAME,
+            len: bytes.len(),
+            limit: MAX_MESSAGE_BYTES,
+        });
     }
     Ok(bytes)
 }
@@ -81,38 +96,68 @@ pub fn decode_with_limit<T: DeserializeOwned + WireMessage>(
 ) -> Result<T, CodecError> {
     let limit = limit.min(MAX_MESSAGE_BYTES);
     if bytes.len() > limit {
-        return Err(CodecError::TooLarge { what: T::NAME, len: bytes.len(), limit });
+        return Err(CodecError::TooLarge {
+            what: T::NAME,
+            len: bytes.len(),
+            limit,
+        });
     }
     // Every message starts with its `wire_version` field: check it before the layout it governs.
-    let (version, _): (u32, usize) = bincode::serde::decode_from_slice(bytes, config())
-        .map_err(|source| CodecError::Decode { what: T::NAME, source })?;
+    let (version, _): (u32, usize) =
+        bincode::serde::decode_from_slice(bytes, config()).map_err(|source| {
+            CodecError::Decode {
+                what: T::NAME,
+                source,
+            }
+        })?;
     if version != WIRE_VERSION {
-        return Err(CodecError::WrongVersion { what: T::NAME, got: version, expected: WIRE_VERSION });
+        return Err(CodecError::WrongVersion {
+            what: T::NAME,
+            got: version,
+            expected: WIRE_VERSION,
+        });
     }
-    let (message, read): (T, usize) = bincode::serde::decode_from_slice(bytes, config())
-        .map_err(|source| CodecError::Decode { what: T::NAME, source })?;
+    let (message, read): (T, usize) =
+        bincode::serde::decode_from_slice(bytes, config()).map_err(|source| {
+            CodecError::Decode {
+                what: T::NAME,
+                source,
+            }
+        })?;
     if read != bytes.len() {
-        return Err(CodecError::TrailingBytes { what: T::NAME, len: bytes.len() - read });
+        return Err(CodecError::TrailingBytes {
+            what: T::NAME,
+            len: bytes.len() - read,
+        });
     }
     Ok(message)
 }
 
 /// Encode a JSON message (metrics, registry metadata).
 pub fn encode_json<T: Serialize + WireMessage>(message: &T) -> Result<Vec<u8>, CodecError> {
-    serde_json::to_vec(message).map_err(|source| CodecError::Json { what: T::NAME, source })
+    serde_json::to_vec(message).map_err(|source| CodecError::Json {
+        what: T::NAME,
+        source,
+    })
 }
 
 /// Decode a JSON message, checking its `wire_version` first.
 pub fn decode_json<T: DeserializeOwned + WireMessage>(bytes: &[u8]) -> Result<T, CodecError> {
     if bytes.len() > MAX_JSON_BYTES {
-        return Err(CodecError::TooLarge { what: T::NAME, len: bytes.len(), limit: MAX_JSON_BYTES });
+        return Err(CodecError::TooLarge {
+            what: T::NAME,
+            len: bytes.len(),
+            limit: MAX_JSON_BYTES,
+        });
     }
     #[derive(serde::Deserialize)]
     struct VersionOnly {
         wire_version: u32,
     }
-    let head: VersionOnly =
-        serde_json::from_slice(bytes).map_err(|source| CodecError::Json { what: T::NAME, source })?;
+    let head: VersionOnly = serde_json::from_slice(bytes).map_err(|source| CodecError::Json {
+        what: T::NAME,
+        source,
+    })?;
     if head.wire_version != WIRE_VERSION {
         return Err(CodecError::WrongVersion {
             what: T::NAME,
@@ -120,5 +165,8 @@ pub fn decode_json<T: DeserializeOwned + WireMessage>(bytes: &[u8]) -> Result<T,
             expected: WIRE_VERSION,
         });
     }
-    serde_json::from_slice(bytes).map_err(|source| CodecError::Json { what: T::NAME, source })
+    serde_json::from_slice(bytes).map_err(|source| CodecError::Json {
+        what: T::NAME,
+        source,
+    })
 }

@@ -22,8 +22,10 @@ pub enum ConfigError {
 
 /// Read and strictly parse a TOML file into `T` (whose structs use `deny_unknown_fields`).
 pub fn load_toml<T: DeserializeOwned>(path: &Path) -> Result<T, ConfigError> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|source| ConfigError::Read { path: path.to_path_buf(), source })?;
+    let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
     parse_toml(&text, path)
 }
 
@@ -31,14 +33,21 @@ pub fn load_toml<T: DeserializeOwned>(path: &Path) -> Result<T, ConfigError> {
 pub fn parse_toml<T: DeserializeOwned>(text: &str, path: &Path) -> Result<T, ConfigError> {
     toml::from_str(text).map_err(|err| {
         // toml's message names the unknown key and shows the offending line; prefix the line number.
-        let line = err
-            .span()
-            .map(|span| text.as_bytes()[..span.start.min(text.len())].iter().filter(|&&b| b == b'\n').count() + 1);
+        let line = err.span().map(|span| {
+            text.as_bytes()[..span.start.min(text.len())]
+                .iter()
+                .filter(|&&b| b == b'\n')
+                .count()
+                + 1
+        });
         let message = match line {
             Some(line) => format!("line {line}: {}", err.message()),
             None => err.message().to_string(),
         };
-        ConfigError::Parse { path: path.to_path_buf(), message }
+        ConfigError::Parse {
+            path: path.to_path_buf(),
+            message,
+        }
     })
 }
 
@@ -62,7 +71,9 @@ mod tests {
     #[test]
     fn misspelt_key_is_named_with_file_and_line() {
         let text = "[actor]\nenvs = 4\nnmae = \"x\"\n";
-        let err = parse_toml::<File>(text, Path::new("configs/x.toml")).unwrap_err().to_string();
+        let err = parse_toml::<File>(text, Path::new("configs/x.toml"))
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("configs/x.toml"), "{err}");
         assert!(err.contains("nmae"), "{err}");
         assert!(err.contains("line 3"), "{err}");

@@ -30,7 +30,13 @@ pub struct KeyError {
 /// Check that `name` is usable as one key segment: non-empty, at most 64 characters of
 /// `[A-Za-z0-9_.-]`, not starting with `.` — so no `/`, wildcards (`*`, `**`), `$`, `?`, `#` or spaces.
 pub fn validate_segment(what: &'static str, name: &str) -> Result<(), KeyError> {
-    let fail = |reason| Err(KeyError { what, name: name.to_string(), reason });
+    let fail = |reason| {
+        Err(KeyError {
+            what,
+            name: name.to_string(),
+            reason,
+        })
+    };
     if name.is_empty() {
         return fail("it is empty");
     }
@@ -40,7 +46,10 @@ pub fn validate_segment(what: &'static str, name: &str) -> Result<(), KeyError> 
     if name.starts_with('.') {
         return fail("it starts with '.'");
     }
-    if !name.bytes().all(|b| b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.')) {
+    if !name
+        .bytes()
+        .all(|b| b.is_ascii_alphanumeric() || matches!(b, b'-' | b'_' | b'.'))
+    {
         return fail("it contains a character other than letters, digits, '-', '_' and '.'");
     }
     Ok(())
@@ -93,7 +102,10 @@ pub fn actors_all(run: &str) -> String {
 
 /// Parse `l3p/<run>/actors/<robot>/<actor>` back into `(robot, actor)`.
 pub fn parse_actor_liveliness<'a>(run: &str, key: &'a str) -> Option<(&'a str, &'a str)> {
-    let rest = key.strip_prefix(ROOT)?.strip_prefix('/')?.strip_prefix(run)?;
+    let rest = key
+        .strip_prefix(ROOT)?
+        .strip_prefix('/')?
+        .strip_prefix(run)?;
     let rest = rest.strip_prefix("/actors/")?;
     let (robot, actor) = rest.split_once('/')?;
     (!actor.contains('/')).then_some((robot, actor))
@@ -126,7 +138,10 @@ mod tests {
     #[test]
     fn keys_follow_the_design_layout() {
         assert_eq!(rollout("r1", "a1", "0"), "l3p/r1/rollout/a1/0");
-        assert_eq!(policy_weights("r1", "go1", 7), "l3p/r1/policy/weights/go1/7");
+        assert_eq!(
+            policy_weights("r1", "go1", 7),
+            "l3p/r1/policy/weights/go1/7"
+        );
         assert_eq!(actor_liveliness("r", "a1", "x"), "l3p/r/actors/a1/x");
         assert_eq!(robot_command("dog"), "l3p/robot/dog/command");
         assert_eq!(registry("list"), "l3p/registry/list");
@@ -135,14 +150,31 @@ mod tests {
     #[test]
     fn liveliness_keys_parse_back() {
         let key = actor_liveliness("run-1", "anymal_c", "actor-3");
-        assert_eq!(parse_actor_liveliness("run-1", &key), Some(("anymal_c", "actor-3")));
+        assert_eq!(
+            parse_actor_liveliness("run-1", &key),
+            Some(("anymal_c", "actor-3"))
+        );
         assert_eq!(parse_actor_liveliness("run-2", &key), None);
-        assert_eq!(parse_actor_liveliness("run-1", "l3p/run-1/actors/a1/x/y"), None);
+        assert_eq!(
+            parse_actor_liveliness("run-1", "l3p/run-1/actors/a1/x/y"),
+            None
+        );
     }
 
     #[test]
     fn segments_reject_wildcards_and_separators() {
-        for bad in ["", "a/b", "*", "**", "a b", "$x", "a?b", "#", ".hidden", &"x".repeat(65)] {
+        for bad in [
+            "",
+            "a/b",
+            "*",
+            "**",
+            "a b",
+            "$x",
+            "a?b",
+            "#",
+            ".hidden",
+            &"x".repeat(65),
+        ] {
             let err = validate_segment("run", bad).unwrap_err();
             assert!(err.to_string().contains("invalid run name"), "{err}");
         }

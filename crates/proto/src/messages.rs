@@ -137,6 +137,9 @@ pub struct PolicyAnnounce {
     pub wire_version: u32,
     pub run: String,
     pub version: u64,
+    /// Identifies one learner process (its start time, ms): a restarted learner may announce a
+    /// version an actor already collected for its predecessor, and must still get a chunk.
+    pub incarnation: u64,
     /// Training mode (`mlp`, `l3p`, `mlp-transfer`, `l3p-transfer`).
     pub mode: String,
     pub robots: Vec<RobotWeights>,

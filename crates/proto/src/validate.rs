@@ -8,19 +8,47 @@ use crate::{RobotCommand, RobotState, RolloutChunk, WIRE_VERSION, WireMessage};
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ValidationError {
     #[error("{what}: wire version {got}, expected {expected}")]
-    WrongVersion { what: &'static str, got: u32, expected: u32 },
+    WrongVersion {
+        what: &'static str,
+        got: u32,
+        expected: u32,
+    },
     #[error("{what}: {field} must be positive")]
-    ZeroDimension { what: &'static str, field: &'static str },
+    ZeroDimension {
+        what: &'static str,
+        field: &'static str,
+    },
     #[error("{what}: declared dimensions overflow")]
     Overflow { what: &'static str },
     #[error("{what}: field `{field}` has {got} values but the declared dimensions need {expected}")]
-    Length { what: &'static str, field: &'static str, expected: usize, got: usize },
+    Length {
+        what: &'static str,
+        field: &'static str,
+        expected: usize,
+        got: usize,
+    },
     #[error("{what}: field `{field}` holds {value} at index {index}{position}")]
-    NonFinite { what: &'static str, field: &'static str, index: usize, value: f32, position: String },
+    NonFinite {
+        what: &'static str,
+        field: &'static str,
+        index: usize,
+        value: f32,
+        position: String,
+    },
     #[error("{what}: field `{field}` holds {value} at index {index}: must be positive")]
-    NonPositive { what: &'static str, field: &'static str, index: usize, value: f32 },
+    NonPositive {
+        what: &'static str,
+        field: &'static str,
+        index: usize,
+        value: f32,
+    },
     #[error("{what}: field `{field}`: expected {expected}, got {got}")]
-    Mismatch { what: &'static str, field: &'static str, expected: String, got: String },
+    Mismatch {
+        what: &'static str,
+        field: &'static str,
+        expected: String,
+        got: String,
+    },
     #[error("{0}")]
     Name(#[from] KeyError),
 }
@@ -43,7 +71,12 @@ fn check_len(
     expected: usize,
 ) -> Result<(), ValidationError> {
     if got != expected {
-        return Err(ValidationError::Length { what, field, expected, got });
+        return Err(ValidationError::Length {
+            what,
+            field,
+            expected,
+            got,
+        });
     }
     Ok(())
 }
@@ -66,7 +99,13 @@ fn check_finite(
                 }
                 _ => String::new(),
             };
-            Err(ValidationError::NonFinite { what, field, index, value: values[index], position })
+            Err(ValidationError::NonFinite {
+                what,
+                field,
+                index,
+                value: values[index],
+                position,
+            })
         }
     }
 }
@@ -106,7 +145,12 @@ impl RolloutChunk {
         check_len(W, "rewards", self.rewards.len(), samples)?;
         check_len(W, "terminated", self.terminated.len(), samples)?;
         check_len(W, "truncated", self.truncated.len(), samples)?;
-        check_len(W, "last_observations", self.last_observations.len(), last_len)?;
+        check_len(
+            W,
+            "last_observations",
+            self.last_observations.len(),
+            last_len,
+        )?;
 
         check_finite(W, "observations", &self.observations, Some((envs, obs)))?;
         check_finite(W, "actions", &self.actions, Some((envs, act)))?;
@@ -114,7 +158,12 @@ impl RolloutChunk {
         check_finite(W, "action_means", &self.action_means, Some((envs, act)))?;
         check_finite(W, "action_stds", &self.action_stds, Some((envs, act)))?;
         check_finite(W, "rewards", &self.rewards, Some((envs, 1)))?;
-        check_finite(W, "last_observations", &self.last_observations, Some((1, obs)))?;
+        check_finite(
+            W,
+            "last_observations",
+            &self.last_observations,
+            Some((1, obs)),
+        )?;
         if let Some(index) = self.action_stds.iter().position(|&s| s <= 0.0) {
             return Err(ValidationError::NonPositive {
                 what: W,
@@ -195,7 +244,12 @@ impl RobotCommand {
         const W: &str = "robot command";
         check_version(self)?;
         validate_segment("robot id", &self.robot_id)?;
-        check_len(W, "joint_pos_target", self.joint_pos_target.len(), num_joints)?;
+        check_len(
+            W,
+            "joint_pos_target",
+            self.joint_pos_target.len(),
+            num_joints,
+        )?;
         check_len(W, "kp", self.kp.len(), num_joints)?;
         check_len(W, "kd", self.kd.len(), num_joints)?;
         check_finite(W, "joint_pos_target", &self.joint_pos_target, None)?;

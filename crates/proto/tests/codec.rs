@@ -18,22 +18,41 @@ fn floats(len: usize) -> impl Strategy<Value = Vec<f32>> {
 }
 
 fn episode() -> impl Strategy<Value = EpisodeStats> {
-    (finite(), any::<u32>(), 0.0f32..10.0, 0u8..6, finite(), finite(), any::<bool>()).prop_map(
-        |(episode_return, length, terrain_level, terrain_type, lin, yaw, terminated)| EpisodeStats {
-            episode_return,
-            length,
-            terrain_level,
-            terrain_type,
-            lin_vel_error: lin,
-            yaw_rate_error: yaw,
-            terminated,
-        },
+    (
+        finite(),
+        any::<u32>(),
+        0.0f32..10.0,
+        0u8..6,
+        finite(),
+        finite(),
+        any::<bool>(),
     )
+        .prop_map(
+            |(episode_return, length, terrain_level, terrain_type, lin, yaw, terminated)| {
+                EpisodeStats {
+                    episode_return,
+                    length,
+                    terrain_level,
+                    terrain_type,
+                    lin_vel_error: lin,
+                    yaw_rate_error: yaw,
+                    terminated,
+                }
+            },
+        )
 }
 
 fn chunk() -> impl Strategy<Value = RolloutChunk> {
-    (1usize..4, 1usize..4, 1usize..6, 1usize..4, name(), name(), any::<u64>()).prop_flat_map(
-        |(envs, steps, obs, act, robot, actor, version)| {
+    (
+        1usize..4,
+        1usize..4,
+        1usize..6,
+        1usize..4,
+        name(),
+        name(),
+        any::<u64>(),
+    )
+        .prop_flat_map(|(envs, steps, obs, act, robot, actor, version)| {
             let samples = envs * steps;
             (
                 floats(samples * obs),
@@ -62,16 +81,20 @@ fn chunk() -> impl Strategy<Value = RolloutChunk> {
                     c.episodes = eps;
                     c
                 })
-        },
-    )
+        })
 }
 
 fn announce() -> impl Strategy<Value = PolicyAnnounce> {
-    (name(), any::<u64>(), prop::collection::vec((name(), "[0-9a-f]{64}", any::<u64>()), 0..4))
+    (
+        name(),
+        any::<u64>(),
+        prop::collection::vec((name(), "[0-9a-f]{64}", any::<u64>()), 0..4),
+    )
         .prop_map(|(run, version, robots)| PolicyAnnounce {
             wire_version: WIRE_VERSION,
             run,
             version,
+            incarnation: version ^ 0x5a5a,
             mode: "l3p".into(),
             robots: robots
                 .into_iter()
@@ -88,8 +111,13 @@ fn announce() -> impl Strategy<Value = PolicyAnnounce> {
 }
 
 fn weights() -> impl Strategy<Value = WeightsBlob> {
-    (name(), name(), any::<u64>(), prop::collection::vec(any::<u8>(), 0..512)).prop_map(
-        |(run, robot, version, bytes)| WeightsBlob {
+    (
+        name(),
+        name(),
+        any::<u64>(),
+        prop::collection::vec(any::<u8>(), 0..512),
+    )
+        .prop_map(|(run, robot, version, bytes)| WeightsBlob {
             wire_version: WIRE_VERSION,
             run,
             robot,
@@ -97,12 +125,16 @@ fn weights() -> impl Strategy<Value = WeightsBlob> {
             format: "l3p-export-v1".into(),
             sha256: "00".repeat(32),
             bytes,
-        },
-    )
+        })
 }
 
 fn metrics() -> impl Strategy<Value = MetricsRecord> {
-    (name(), name(), any::<u64>(), prop::collection::btree_map(name(), -1.0e9f64..1.0e9, 0..8))
+    (
+        name(),
+        name(),
+        any::<u64>(),
+        prop::collection::btree_map(name(), -1.0e9f64..1.0e9, 0..8),
+    )
         .prop_map(|(run, source, iteration, values)| {
             let mut m = MetricsRecord::new(&run, &source, iteration, 1_700_000_000_000);
             m.values = values;
@@ -111,20 +143,27 @@ fn metrics() -> impl Strategy<Value = MetricsRecord> {
 }
 
 fn robot_state() -> impl Strategy<Value = RobotState> {
-    (name(), any::<u64>(), floats(12), floats(12), prop::array::uniform3(finite())).prop_map(
-        |(robot_id, seq, joint_pos, joint_vel, command)| RobotState {
-            wire_version: WIRE_VERSION,
-            robot_id,
-            seq,
-            stamp_ns: seq.wrapping_mul(20_000_000),
-            base_quat: [1.0, 0.0, 0.0, 0.0],
-            base_lin_vel: [0.1, 0.0, 0.0],
-            base_ang_vel: [0.0, 0.0, 0.2],
-            joint_pos,
-            joint_vel,
-            command,
-        },
+    (
+        name(),
+        any::<u64>(),
+        floats(12),
+        floats(12),
+        prop::array::uniform3(finite()),
     )
+        .prop_map(
+            |(robot_id, seq, joint_pos, joint_vel, command)| RobotState {
+                wire_version: WIRE_VERSION,
+                robot_id,
+                seq,
+                stamp_ns: seq.wrapping_mul(20_000_000),
+                base_quat: [1.0, 0.0, 0.0, 0.0],
+                base_lin_vel: [0.1, 0.0, 0.0],
+                base_ang_vel: [0.0, 0.0, 0.2],
+                joint_pos,
+                joint_vel,
+                command,
+            },
+        )
 }
 
 fn robot_command() -> impl Strategy<Value = RobotCommand> {
@@ -134,8 +173,14 @@ fn robot_command() -> impl Strategy<Value = RobotCommand> {
         Just(ControlMode::Policy),
         Just(ControlMode::Damping)
     ];
-    (name(), any::<u64>(), mode, floats(12), prop::collection::vec(0.0f32..200.0, 12)).prop_map(
-        |(robot_id, seq, mode, joint_pos_target, kp)| RobotCommand {
+    (
+        name(),
+        any::<u64>(),
+        mode,
+        floats(12),
+        prop::collection::vec(0.0f32..200.0, 12),
+    )
+        .prop_map(|(robot_id, seq, mode, joint_pos_target, kp)| RobotCommand {
             wire_version: WIRE_VERSION,
             robot_id,
             seq,
@@ -144,8 +189,7 @@ fn robot_command() -> impl Strategy<Value = RobotCommand> {
             joint_pos_target,
             kd: kp.iter().map(|k| k * 0.02).collect(),
             kp,
-        },
-    )
+        })
 }
 
 /// Binary round trip plus the failure modes that must be errors.
@@ -159,17 +203,27 @@ where
     // Every strict prefix is an error.
     for cut in [0, 1, bytes.len() / 2, bytes.len().saturating_sub(1)] {
         if cut < bytes.len() {
-            assert!(codec::decode::<T>(&bytes[..cut]).is_err(), "prefix {cut} of {} decoded", bytes.len());
+            assert!(
+                codec::decode::<T>(&bytes[..cut]).is_err(),
+                "prefix {cut} of {} decoded",
+                bytes.len()
+            );
         }
     }
     // Trailing garbage is an error.
     let mut longer = bytes.clone();
     longer.push(0);
-    assert!(matches!(codec::decode::<T>(&longer), Err(CodecError::TrailingBytes { .. })));
+    assert!(matches!(
+        codec::decode::<T>(&longer),
+        Err(CodecError::TrailingBytes { .. })
+    ));
     // Another wire version is refused before the layout is trusted.
     let mut other = bytes.clone();
     other[0] = (WIRE_VERSION + 1) as u8;
-    assert!(matches!(codec::decode::<T>(&other), Err(CodecError::WrongVersion { .. })));
+    assert!(matches!(
+        codec::decode::<T>(&other),
+        Err(CodecError::WrongVersion { .. })
+    ));
 }
 
 fn check_json<T>(message: &T)
@@ -263,7 +317,10 @@ fn oversized_input_is_refused_before_parsing() {
     let err = codec::decode_with_limit::<RobotState>(&bytes, 512).unwrap_err();
     assert!(err.to_string().contains("exceeds the limit"), "{err}");
     let big_json = vec![b' '; codec::MAX_JSON_BYTES + 1];
-    assert!(matches!(codec::decode_json::<MetricsRecord>(&big_json), Err(CodecError::TooLarge { .. })));
+    assert!(matches!(
+        codec::decode_json::<MetricsRecord>(&big_json),
+        Err(CodecError::TooLarge { .. })
+    ));
 }
 
 #[test]
@@ -271,8 +328,13 @@ fn wrong_json_version_names_both_versions() {
     let mut m = MetricsRecord::new("r", "learner", 3, 0);
     m.wire_version = 99;
     let bytes = codec::encode_json(&m).unwrap();
-    let err = codec::decode_json::<MetricsRecord>(&bytes).unwrap_err().to_string();
-    assert!(err.contains("99") && err.contains(&WIRE_VERSION.to_string()), "{err}");
+    let err = codec::decode_json::<MetricsRecord>(&bytes)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("99") && err.contains(&WIRE_VERSION.to_string()),
+        "{err}"
+    );
 }
 
 #[test]

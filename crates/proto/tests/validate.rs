@@ -19,7 +19,10 @@ fn wrong_length_names_field_and_sizes() {
     let mut c = chunk();
     c.rewards.pop();
     let err = c.validate().unwrap_err().to_string();
-    assert!(err.contains("`rewards`") && err.contains("5 values") && err.contains("need 6"), "{err}");
+    assert!(
+        err.contains("`rewards`") && err.contains("5 values") && err.contains("need 6"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -29,13 +32,19 @@ fn nan_names_field_index_and_position() {
     let index = 4 * 2 + 4 + 2;
     c.observations[index] = f32::NAN;
     let err = c.validate().unwrap_err().to_string();
-    assert!(err.contains("`observations`") && err.contains(&format!("index {index}")), "{err}");
+    assert!(
+        err.contains("`observations`") && err.contains(&format!("index {index}")),
+        "{err}"
+    );
     assert!(err.contains("step 1, env 1, dim 2"), "{err}");
 
     let mut c = chunk();
     c.rewards[5] = f32::INFINITY;
     let err = c.validate().unwrap_err().to_string();
-    assert!(err.contains("`rewards`") && err.contains("index 5"), "{err}");
+    assert!(
+        err.contains("`rewards`") && err.contains("index 5"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -43,7 +52,10 @@ fn non_positive_std_is_rejected() {
     let mut c = chunk();
     c.action_stds[3] = 0.0;
     let err = c.validate().unwrap_err().to_string();
-    assert!(err.contains("`action_stds`") && err.contains("index 3"), "{err}");
+    assert!(
+        err.contains("`action_stds`") && err.contains("index 3"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -52,13 +64,28 @@ fn dimension_mismatch_and_bad_names_are_rejected() {
     assert!(err.contains("obs_dim") && err.contains("48"), "{err}");
     let mut c = chunk();
     c.robot = "a1/../x".into();
-    assert!(c.validate().unwrap_err().to_string().contains("invalid robot name"));
+    assert!(
+        c.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("invalid robot name")
+    );
     let mut c = chunk();
     c.wire_version = 0;
-    assert!(c.validate().unwrap_err().to_string().contains("wire version 0"));
+    assert!(
+        c.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("wire version 0")
+    );
     let mut c = chunk();
     c.num_envs = 0;
-    assert!(c.validate().unwrap_err().to_string().contains("num_envs must be positive"));
+    assert!(
+        c.validate()
+            .unwrap_err()
+            .to_string()
+            .contains("num_envs must be positive")
+    );
 }
 
 #[test]
@@ -85,11 +112,27 @@ fn robot_state_checks_joint_count_and_quaternion() {
         command: [0.0; 3],
     };
     state.validate(12).unwrap();
-    assert!(state.validate(16).unwrap_err().to_string().contains("joint_pos"));
+    assert!(
+        state
+            .validate(16)
+            .unwrap_err()
+            .to_string()
+            .contains("joint_pos")
+    );
     let mut bad = state.clone();
     bad.base_quat = [2.0, 0.0, 0.0, 0.0];
-    assert!(bad.validate(12).unwrap_err().to_string().contains("unit quaternion"));
+    assert!(
+        bad.validate(12)
+            .unwrap_err()
+            .to_string()
+            .contains("unit quaternion")
+    );
     let mut bad = state;
     bad.joint_vel[7] = f32::NAN;
-    assert!(bad.validate(12).unwrap_err().to_string().contains("index 7"));
+    assert!(
+        bad.validate(12)
+            .unwrap_err()
+            .to_string()
+            .contains("index 7")
+    );
 }

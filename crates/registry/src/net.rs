@@ -40,8 +40,13 @@ impl ZenohSettings {
     pub fn loopback(listen: Option<u16>, connect: &[u16]) -> Self {
         Self {
             mode: "peer".into(),
-            listen: listen.map(|p| vec![format!("tcp/127.0.0.1:{p}")]).unwrap_or_default(),
-            connect: connect.iter().map(|p| format!("tcp/127.0.0.1:{p}")).collect(),
+            listen: listen
+                .map(|p| vec![format!("tcp/127.0.0.1:{p}")])
+                .unwrap_or_default(),
+            connect: connect
+                .iter()
+                .map(|p| format!("tcp/127.0.0.1:{p}"))
+                .collect(),
             multicast_scouting: false,
             config_file: None,
         }
@@ -55,7 +60,9 @@ impl ZenohSettings {
             None => zenoh::Config::default(),
         };
         let mut set = |key: &str, value: String| {
-            config.insert_json5(key, &value).map_err(|e| NetError::Config(format!("{key}: {e}")))
+            config
+                .insert_json5(key, &value)
+                .map_err(|e| NetError::Config(format!("{key}: {e}")))
         };
         set("mode", json(&self.mode))?;
         if !self.listen.is_empty() {
@@ -79,14 +86,18 @@ fn json<T: Serialize>(value: &T) -> String {
 pub enum NetError {
     #[error("invalid zenoh config: {0}")]
     Config(String),
-    #[error("cannot open zenoh session: {0}\nhint: check the listen/connect endpoints and that the port is free")]
+    #[error(
+        "cannot open zenoh session: {0}\nhint: check the listen/connect endpoints and that the port is free"
+    )]
     Open(String),
 }
 
 /// Open a Zenoh session with these settings.
 pub async fn open_session(settings: &ZenohSettings) -> Result<zenoh::Session, NetError> {
     let config = settings.to_zenoh_config()?;
-    zenoh::open(config).await.map_err(|e| NetError::Open(e.to_string()))
+    zenoh::open(config)
+        .await
+        .map_err(|e| NetError::Open(e.to_string()))
 }
 
 /// A TCP port on 127.0.0.1 that was free a moment ago (for loopback sessions in local mode and tests).
