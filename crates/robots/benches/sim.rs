@@ -7,7 +7,10 @@ use l3p_robots::catalog::RobotSpec;
 use l3p_robots::config::{EnvConfig, TerrainConfig, TerrainPreset};
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).filter(|a| !a.starts_with("--")).collect();
+    let args: Vec<String> = std::env::args()
+        .skip(1)
+        .filter(|a| !a.starts_with("--"))
+        .collect();
     let robot = args.first().map(String::as_str).unwrap_or("a1");
     let envs: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(64);
     let threads: usize = args.get(2).and_then(|s| s.parse().ok()).unwrap_or(2);
@@ -18,14 +21,26 @@ fn main() {
     };
     let mut flat_cps = None;
     for preset in [TerrainPreset::Flat, TerrainPreset::Curriculum] {
-        let cfg = EnvConfig { terrain: TerrainConfig::with_preset(preset), height_scan: preset != TerrainPreset::Flat, ..EnvConfig::default() };
+        let cfg = EnvConfig {
+            terrain: TerrainConfig::with_preset(preset),
+            height_scan: preset != TerrainPreset::Flat,
+            ..EnvConfig::default()
+        };
         match run_sim_bench(spec, &cfg, envs, threads, seconds, 0) {
             Ok(r) => {
                 let per = |d: std::time::Duration| d.as_secs_f64() * 1e6 / r.steps.max(1) as f64;
-                let ratio = flat_cps.map(|f: f64| r.control_steps_per_s / f).unwrap_or(1.0);
+                let ratio = flat_cps
+                    .map(|f: f64| r.control_steps_per_s / f)
+                    .unwrap_or(1.0);
                 println!(
                     "{robot} {preset:?} envs {envs} threads {threads}: {:.0} control steps/s (x{ratio:.2} vs flat) | us/step physics {:.0} obs {:.0} rewards {:.0} resets {:.0} total {:.0} | nan resets {}",
-                    r.control_steps_per_s, per(r.timings.physics), per(r.timings.observations), per(r.timings.rewards), per(r.timings.resets), per(r.timings.total), r.nan_resets
+                    r.control_steps_per_s,
+                    per(r.timings.physics),
+                    per(r.timings.observations),
+                    per(r.timings.rewards),
+                    per(r.timings.resets),
+                    per(r.timings.total),
+                    r.nan_resets
                 );
                 if preset == TerrainPreset::Flat {
                     flat_cps = Some(r.control_steps_per_s);

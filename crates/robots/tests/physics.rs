@@ -170,18 +170,32 @@ fn heightfield_ground_is_z_up_with_rows_along_y() {
     for iy in 0..ny {
         for ix in 0..nx {
             let (x, y) = (x0 + ix as f32 * cell, y0 + iy as f32 * cell);
-            heights[iy * nx + ix] = if x > 0.5 { 0.3 } else { 0.0 } + if y > 0.3 { 0.1 } else { 0.0 };
+            heights[iy * nx + ix] =
+                if x > 0.5 { 0.3 } else { 0.0 } + if y > 0.3 { 0.1 } else { 0.0 };
         }
     }
     let mut w = SimWorld::new(SimConfig::default());
     w.add_heightfield_ground(&heights, nx, ny, cell, [x0, y0]);
-    let cases = [(1.2, -0.6, 0.3), (-1.2, 0.7, 0.1), (1.2, 0.7, 0.4), (-1.2, -0.6, 0.0)];
-    let balls: Vec<_> = cases.iter().map(|&(x, y, _)| w.add_free_ball(Vec3::new(x, y, 1.0), 0.05, 1.0)).collect();
+    let cases = [
+        (1.2, -0.6, 0.3),
+        (-1.2, 0.7, 0.1),
+        (1.2, 0.7, 0.4),
+        (-1.2, -0.6, 0.0),
+    ];
+    let balls: Vec<_> = cases
+        .iter()
+        .map(|&(x, y, _)| w.add_free_ball(Vec3::new(x, y, 1.0), 0.05, 1.0))
+        .collect();
     for _ in 0..400 {
         w.step();
     }
     for (b, &(x, y, h)) in balls.iter().zip(&cases) {
         let (p, _) = w.body_state(*b).unwrap();
-        assert!((p.z - (h + 0.05)).abs() < 0.01, "ball at ({x}, {y}) rests at {} instead of {}", p.z, h + 0.05);
+        assert!(
+            (p.z - (h + 0.05)).abs() < 0.01,
+            "ball at ({x}, {y}) rests at {} instead of {}",
+            p.z,
+            h + 0.05
+        );
     }
 }
