@@ -393,46 +393,7 @@ pub async fn run<E: RolloutEnv>(
         );
         record.insert("send_seconds", send_seconds);
         record.insert("fetch_seconds", fetch_seconds);
-        record.insert("episodes", ch.episodes.len() as f64);
-        if !ch.episodes.is_empty() {
-            let k = ch.episodes.len() as f64;
-            record.insert(
-                "episode_return",
-                ch.episodes
-                    .iter()
-                    .map(|e| e.episode_return as f64)
-                    .sum::<f64>()
-                    / k,
-            );
-            record.insert(
-                "episode_length",
-                ch.episodes.iter().map(|e| e.length as f64).sum::<f64>() / k,
-            );
-            record.insert(
-                "terrain_level",
-                ch.episodes
-                    .iter()
-                    .map(|e| e.terrain_level as f64)
-                    .sum::<f64>()
-                    / k,
-            );
-            record.insert(
-                "lin_vel_error",
-                ch.episodes
-                    .iter()
-                    .map(|e| e.lin_vel_error as f64)
-                    .sum::<f64>()
-                    / k,
-            );
-            record.insert(
-                "yaw_rate_error",
-                ch.episodes
-                    .iter()
-                    .map(|e| e.yaw_rate_error as f64)
-                    .sum::<f64>()
-                    / k,
-            );
-        }
+        record.insert_episode_means(&ch.episodes);
         if let Ok(json) = codec::encode_json(&record) {
             let _ = session.put(&metrics_key, json).await;
         }

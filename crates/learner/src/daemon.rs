@@ -335,37 +335,6 @@ async fn emit_metrics(
     Ok(())
 }
 
-/// Aggregate the episode statistics of the chunks into the iteration's metrics.
-fn episode_metrics(record: &mut MetricsRecord, chunks: &[RolloutChunk]) {
-    let episodes: Vec<_> = chunks.iter().flat_map(|c| c.episodes.iter()).collect();
-    record.insert("episodes", episodes.len() as f64);
-    if episodes.is_empty() {
-        return;
-    }
-    let n = episodes.len() as f64;
-    let mean = |f: &dyn Fn(&l3p_proto::EpisodeStats) -> f64| {
-        episodes.iter().map(|e| f(e)).sum::<f64>() / n
-    };
-    record.insert("episode_return", mean(&|e| e.episode_return as f64));
-    record.insert("episode_length", mean(&|e| e.length as f64));
-    record.insert("terrain_level", mean(&|e| e.terrain_level as f64));
-    record.insert("lin_vel_error", mean(&|e| e.lin_vel_error as f64));
-    record.insert("yaw_rate_error", mean(&|e| e.yaw_rate_error as f64));
-    record.insert(
-        "fall_fraction",
-        mean(&|e| if e.terminated { 1.0 } else { 0.0 }),
-    );
-    let mut by_type: BTreeMap<u8, (f64, f64)> = BTreeMap::new();
-    for e in &episodes {
-        let slot = by_type.entry(e.terrain_type).or_default();
-        slot.0 += e.terrain_level as f64;
-        slot.1 += 1.0;
-    }
-    for (kind, (sum, count)) in by_type {
-        record.insert(&format!("terrain_level/type{kind}"), sum / count);
-    }
-}
-
 fn update_metrics(record: &mut MetricsRecord, m: &UpdateMetrics) {
     for (key, value) in [
         ("approx_kl", m.approx_kl as f64),
@@ -657,7 +626,7 @@ pub async fn run(
             .unwrap_or(0.0);
         let mut record = MetricsRecord::new(&run, "learner", new_version, unix_ms());
         update_metrics(&mut record, &update);
-        episode_metrics(&mut record, &chunks);
+        record.insert_episode_means(chunks.iter().flat_map(|c| c.episodes.iter()));
         record.insert("iteration_seconds", iteration_seconds);
         record.insert("collect_seconds", collect_seconds);
         record.insert(
@@ -702,32 +671,4 @@ pub async fn run(
         dropped_chunks: dropped,
         rejected_chunks: rejected,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn episode_metrics_average_and_split_by_terrain_type() {
-        let mut chunk = RolloutChunk::zeros("r", "a1", "0", 0, 1, 1, 1, 1);
-        for (level, kind, terminated) in [(2.0, 0, false), (4.0, 0, true), (1.0, 3, false)] {
-            chunk.episodes.push(l3p_proto::EpisodeStats {
-                episode_return: 3.0,
-                length: 100,
-                terrain_level: level,
-                terrain_type: kind,
-                lin_vel_error: 0.1,
-                yaw_rate_error: 0.2,
-                terminated,
-            });
-        }
-        let mut record = MetricsRecord::new("r", "learner", 1, 0);
-        episode_metrics(&mut record, &[chunk]);
-        assert_eq!(record.values["episodes"], 3.0);
-        assert!((record.values["terrain_level"] - 7.0 / 3.0).abs() < 1e-9);
-        assert_eq!(record.values["terrain_level/type0"], 3.0);
-        assert_eq!(record.values["terrain_level/type3"], 1.0);
-        assert!((record.values["fall_fraction"] - 1.0 / 3.0).abs() < 1e-9);
-    }
 }

@@ -191,6 +191,40 @@ impl MetricsRecord {
         }
     }
 
+    /// Record the means of finished episodes: `episodes`, `episode_return`, `episode_length`,
+    /// `terrain_level` (and `terrain_level/type<k>` per terrain type), `lin_vel_error`,
+    /// `yaw_rate_error`, `fall_fraction`. Without episodes only `episodes = 0` is recorded.
+    pub fn insert_episode_means<'a>(
+        &mut self,
+        episodes: impl IntoIterator<Item = &'a EpisodeStats>,
+    ) {
+        let episodes: Vec<&EpisodeStats> = episodes.into_iter().collect();
+        self.insert("episodes", episodes.len() as f64);
+        if episodes.is_empty() {
+            return;
+        }
+        let n = episodes.len() as f64;
+        let mean = |f: fn(&EpisodeStats) -> f64| episodes.iter().map(|e| f(e)).sum::<f64>() / n;
+        self.insert("episode_return", mean(|e| e.episode_return as f64));
+        self.insert("episode_length", mean(|e| e.length as f64));
+        self.insert("terrain_level", mean(|e| e.terrain_level as f64));
+        self.insert("lin_vel_error", mean(|e| e.lin_vel_error as f64));
+        self.insert("yaw_rate_error", mean(|e| e.yaw_rate_error as f64));
+        self.insert(
+            "fall_fraction",
+            mean(|e| if e.terminated { 1.0 } else { 0.0 }),
+        );
+        let mut by_type: BTreeMap<u8, (f64, f64)> = BTreeMap::new();
+        for e in &episodes {
+            let slot = by_type.entry(e.terrain_type).or_default();
+            slot.0 += e.terrain_level as f64;
+            slot.1 += 1.0;
+        }
+        for (kind, (sum, count)) in by_type {
+            self.insert(&format!("terrain_level/type{kind}"), sum / count);
+        }
+    }
+
     /// Insert a value; non-finite values are skipped (returns `false`).
     pub fn insert(&mut self, key: &str, value: f64) -> bool {
         if value.is_finite() {

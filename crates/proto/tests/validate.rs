@@ -136,3 +136,26 @@ fn robot_state_checks_joint_count_and_quaternion() {
             .contains("index 7")
     );
 }
+
+#[test]
+fn episode_means_average_and_split_by_terrain_type() {
+    let mut chunk = RolloutChunk::zeros("r", "a1", "0", 0, 1, 1, 1, 1);
+    for (level, kind, terminated) in [(2.0, 0, false), (4.0, 0, true), (1.0, 3, false)] {
+        chunk.episodes.push(EpisodeStats {
+            episode_return: 3.0,
+            length: 100,
+            terrain_level: level,
+            terrain_type: kind,
+            lin_vel_error: 0.1,
+            yaw_rate_error: 0.2,
+            terminated,
+        });
+    }
+    let mut record = MetricsRecord::new("r", "learner", 1, 0);
+    record.insert_episode_means(&chunk.episodes);
+    assert_eq!(record.values["episodes"], 3.0);
+    assert!((record.values["terrain_level"] - 7.0 / 3.0).abs() < 1e-9);
+    assert_eq!(record.values["terrain_level/type0"], 3.0);
+    assert_eq!(record.values["terrain_level/type3"], 1.0);
+    assert!((record.values["fall_fraction"] - 1.0 / 3.0).abs() < 1e-9);
+}
