@@ -29,7 +29,7 @@ enum Command {
     Report(l3p_cli::report_cmd::ReportArgs),
     /// List the built-in robots or check a robot / URDF file (load, stand under PD).
     Robots(l3p_cli::robots_cmd::RobotsArgs),
-    /// Benchmarks (`bench sim`: simulator throughput).
+    /// Benchmarks: `bench sim` (simulator throughput), `bench learner` (PPO update throughput).
     Bench(l3p_cli::bench_cmd::BenchArgs),
     /// The artifact registry: serve it, or list/show/pull/put/tag/history/lineage.
     Registry(l3p_cli::registry_cmd::RegistryArgs),

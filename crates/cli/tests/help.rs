@@ -1,0 +1,63 @@
+//! `l3p --help` lists exactly the commands that exist, and every command's help renders.
+
+use std::process::Command;
+
+fn l3p(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_l3p"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into_owned(),
+    )
+}
+
+const COMMANDS: [&str; 10] = [
+    "train", "learner", "actor", "metrics", "eval", "report", "robots", "bench", "registry",
+    "config",
+];
+
+#[test]
+fn top_level_help_lists_the_commands() {
+    let (ok, text) = l3p(&["--help"]);
+    assert!(ok);
+    for command in COMMANDS {
+        assert!(
+            text.contains(&format!("  {command} ")),
+            "{command} missing from:\n{text}"
+        );
+    }
+    assert!(
+        !text.contains("deploy"),
+        "deploy is not built yet and must not be listed"
+    );
+}
+
+#[test]
+fn every_command_has_help() {
+    for command in COMMANDS {
+        let (ok, text) = l3p(&[command, "--help"]);
+        assert!(
+            ok && text.contains("Usage: l3p"),
+            "{command} --help:\n{text}"
+        );
+    }
+}
+
+#[test]
+fn bad_config_is_a_clear_error_not_a_panic() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("bad.toml");
+    std::fs::write(&path, "[learner]\nmax_iteration = 3\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_l3p"))
+        .args(["config", path.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("max_iteration") && err.contains("bad.toml") && !err.contains("panicked"),
+        "{err}"
+    );
+}
