@@ -357,6 +357,10 @@ pub struct RewardParams {
     pub air_time_min_command: f32,
     /// Contact force norm above which a foot or penalised body is in contact (N). IsaacLab: 1.0.
     pub contact_threshold: f32,
+    /// Clip each step's total reward at zero from below (legged_gym's `only_positive_rewards`, on
+    /// for its A1): with penalties dominating early, falling fast would otherwise pay. IsaacLab:
+    /// false.
+    pub only_positive_rewards: bool,
 }
 
 impl Default for RewardParams {
@@ -366,6 +370,7 @@ impl Default for RewardParams {
             air_time_threshold: 0.5,
             air_time_min_command: 0.1,
             contact_threshold: 1.0,
+            only_positive_rewards: false,
         }
     }
 }
@@ -675,6 +680,7 @@ tracking_std = 0.5
 air_time_threshold = 0.5
 air_time_min_command = 0.1
 contact_threshold = 1.0
+only_positive_rewards = false
 
 # Weights default to the robot's IsaacLab table (RewardScales::for_robot); set a key to override it.
 [rewards]

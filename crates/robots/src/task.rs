@@ -797,6 +797,9 @@ impl Task {
             total += r;
             env.episode.terms[k] += r;
         }
+        if p.only_positive_rewards {
+            total = total.max(0.0);
+        }
         out.reward = total;
         env.episode.ret += total;
         env.episode.lin_vel_err_sum += lin_err_sq.sqrt();
@@ -1143,7 +1146,7 @@ mod tests {
         let spec = cfg.resolve("anymal_c").unwrap();
         let mut p = a1_params();
         p.num_penalised_bodies = 4;
-        let task = Task::new(spec, p).unwrap();
+        let task = Task::new(spec, p.clone()).unwrap();
         let mut env = TaskEnvState::new();
         task.reset_env(&mut env, &st, [0.0; 3], &mut rng);
         let r = task.evaluate(&mut env, &st, &action, &terrain);
@@ -1155,6 +1158,14 @@ mod tests {
         let r = task.evaluate(&mut env, &st, &action, &terrain);
         let want = -5.0 * 0.3f32.sin().powi(2) * dt;
         assert!((r.terms[RewardTerm::FlatOrientationL2 as usize] - want).abs() < 1e-6);
+        // only_positive_rewards clips the negative total at 0 but keeps the per-term values
+        assert!(r.reward < 0.0);
+        let mut spec = cfg.resolve("anymal_c").unwrap();
+        spec.reward_params.only_positive_rewards = true;
+        let task = Task::new(spec, p).unwrap();
+        let clipped = task.evaluate(&mut env, &st, &action, &terrain);
+        assert_eq!(clipped.reward, 0.0);
+        assert_eq!(clipped.terms, r.terms);
     }
 
     #[test]
