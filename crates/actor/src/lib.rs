@@ -232,6 +232,12 @@ fn unix_ms() -> u64 {
         .unwrap_or(0)
 }
 
+fn decode_announce(bytes: &[u8]) -> Option<PolicyAnnounce> {
+    codec::decode_json::<PolicyAnnounce>(bytes)
+        .map_err(|e| warn!("ignored announce: {e}"))
+        .ok()
+}
+
 /// Fetch and verify the weights an announce names for `robot`.
 pub async fn fetch_policy(
     session: &Session,
@@ -324,7 +330,10 @@ pub async fn run<E: RolloutEnv>(
         od,
         ad,
     ));
-    let mut policy: Option<(u64, DeployPolicy)> = None;
+    // Policy held, keyed by (learner incarnation, version), and the announce that named it.
+    let mut policy: Option<((u64, u64), DeployPolicy)> = None;
+    let mut held: Option<PolicyAnnounce> = None;
+    let mut extra = 0u64;
     // (learner incarnation, policy version) of the last chunk sent.
     let mut last_collected: Option<(u64, u64)> = None;
     let mut seq = 0u64;
@@ -334,30 +343,51 @@ pub async fn run<E: RolloutEnv>(
         if opts.max_chunks > 0 && seq >= opts.max_chunks {
             break;
         }
-        // The newest announce queued; collect once per (learner incarnation, version), so a learner
-        // restarted from a checkpoint is followed even to a version collected before.
-        let sample = tokio::select! {
-            _ = cancel.cancelled() => break,
-            sample = announces.recv_async() => match sample { Ok(s) => s, Err(_) => break },
-        };
-        let mut newest = sample;
-        while let Ok(Some(next)) = announces.try_recv() {
-            newest = next;
+        // Which policy to collect with. Collect once per (learner incarnation, version), so a
+        // learner restarted from a checkpoint is followed even to a version collected before; when
+        // the learner tolerates lag (`max_policy_lag` ≥ 1), keep collecting with the current policy
+        // while it updates, up to that many extra chunks per version (collection overlaps updates).
+        let mut newest = None;
+        while let Ok(Some(sample)) = announces.try_recv() {
+            newest = Some(sample);
         }
-        let announce = match codec::decode_json::<PolicyAnnounce>(&newest.payload().to_bytes()) {
-            Ok(a) => a,
-            Err(e) => {
-                warn!("ignored announce: {e}");
-                continue;
+        let fresh = newest
+            .and_then(|s| decode_announce(&s.payload().to_bytes()))
+            .filter(|a| last_collected != Some((a.incarnation, a.version)));
+        let announce = match (fresh, &held) {
+            (Some(a), _) => {
+                extra = 0;
+                a
+            }
+            (None, Some(a))
+                if last_collected == Some((a.incarnation, a.version))
+                    && extra < a.max_policy_lag =>
+            {
+                extra += 1;
+                a.clone()
+            }
+            _ => {
+                let sample = tokio::select! {
+                    _ = cancel.cancelled() => break,
+                    sample = announces.recv_async() => match sample { Ok(s) => s, Err(_) => break },
+                };
+                match decode_announce(&sample.payload().to_bytes()) {
+                    Some(a) if last_collected != Some((a.incarnation, a.version)) => {
+                        extra = 0;
+                        a
+                    }
+                    _ => continue,
+                }
             }
         };
-        if last_collected == Some((announce.incarnation, announce.version)) {
-            continue;
-        }
         let fetch_start = Instant::now();
-        if policy.as_ref().is_none_or(|(v, _)| *v != announce.version) {
+        let key = (announce.incarnation, announce.version);
+        if policy.as_ref().is_none_or(|(k, _)| *k != key) {
             match fetch_policy(&session, &announce, &opts.robot).await {
-                Ok(p) => policy = Some((announce.version, p)),
+                Ok(p) => {
+                    policy = Some((key, p));
+                    held = Some(announce.clone());
+                }
                 Err(e) => {
                     warn!("{e}");
                     continue;
@@ -365,7 +395,7 @@ pub async fn run<E: RolloutEnv>(
             }
         }
         let fetch_seconds = fetch_start.elapsed().as_secs_f64();
-        let Some((version, current)) = policy.clone() else {
+        let Some(((_, version), current)) = policy.clone() else {
             continue;
         };
         let (Some(mut col), Some(mut ch)) = (collector.take(), chunk.take()) else {
