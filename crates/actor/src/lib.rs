@@ -334,6 +334,7 @@ pub async fn run<E: RolloutEnv>(
     let mut policy: Option<((u64, u64), DeployPolicy)> = None;
     let mut held: Option<PolicyAnnounce> = None;
     let mut extra = 0u64;
+    let mut last_send_seconds = 0f64;
     // (learner incarnation, policy version) of the last chunk sent.
     let mut last_collected: Option<(u64, u64)> = None;
     let mut seq = 0u64;
@@ -403,6 +404,7 @@ pub async fn run<E: RolloutEnv>(
         };
         ch.policy_version = version;
         ch.seq = seq;
+        ch.transport_seconds = (fetch_seconds + last_send_seconds) as f32;
         let (col, ch, result) = tokio::task::spawn_blocking(move || {
             let r = col.collect(&current, &mut ch);
             (col, ch, r)
@@ -414,6 +416,7 @@ pub async fn run<E: RolloutEnv>(
         let bytes = codec::encode(&ch).map_err(zerr)?;
         publisher.put(bytes).await.map_err(zerr)?;
         let send_seconds = send_start.elapsed().as_secs_f64();
+        last_send_seconds = send_seconds;
 
         let mut record = MetricsRecord::new(&opts.run, &metrics_source, version, unix_ms());
         record.insert("collect_seconds", ch.collect_seconds as f64);

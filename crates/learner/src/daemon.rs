@@ -593,6 +593,10 @@ pub async fn run(
 
         // Update on a blocking thread; the subscription tasks keep buffering meanwhile.
         let chunks: Vec<RolloutChunk> = std::mem::take(&mut pending).into_values().collect();
+        let actor_transport = chunks
+            .iter()
+            .map(|c| c.transport_seconds as f64)
+            .fold(0.0, f64::max);
         let collect_seconds = chunks
             .iter()
             .map(|c| c.collect_seconds as f64)
@@ -636,7 +640,9 @@ pub async fn run(
         record.insert("actors", live.len() as f64);
         record.insert("dropped_chunks", dropped as f64);
         record.insert("rejected_chunks", rejected as f64);
-        let transport = decode + weights_seconds;
+        // Learner side (decoding chunks, encoding weights) plus the slowest actor's side (fetching
+        // weights, encoding and sending its previous chunk).
+        let transport = decode + weights_seconds + actor_transport;
         record.insert("transport_seconds", transport);
         record.insert("transport_share", transport / iteration_seconds.max(1e-9));
         weights_seconds = 0.0;

@@ -73,6 +73,9 @@ pub struct RolloutChunk {
     pub episodes: Vec<EpisodeStats>,
     /// Seconds the actor spent producing this chunk (simulation + inference).
     pub collect_seconds: f32,
+    /// Seconds the actor spent on the wire for this chunk: fetching its policy's weights plus
+    /// encoding and sending its previous chunk.
+    pub transport_seconds: f32,
 }
 wire_message!(RolloutChunk, "rollout chunk");
 
@@ -111,6 +114,7 @@ impl RolloutChunk {
             last_observations: vec![0.0; num_envs * obs_dim],
             episodes: Vec::new(),
             collect_seconds: 0.0,
+            transport_seconds: 0.0,
         }
     }
 

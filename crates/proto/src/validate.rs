@@ -189,6 +189,19 @@ impl RolloutChunk {
                 });
             }
         }
+        for (field, value) in [
+            ("collect_seconds", self.collect_seconds),
+            ("transport_seconds", self.transport_seconds),
+        ] {
+            if !value.is_finite() || value < 0.0 {
+                return Err(ValidationError::Mismatch {
+                    what: W,
+                    field,
+                    expected: "a finite, non-negative duration".into(),
+                    got: value.to_string(),
+                });
+            }
+        }
         Ok(())
     }
 
