@@ -233,18 +233,10 @@ impl SimWorld {
 
     /// Adds a flat ground plane at `z = height` (a large thin box).
     pub fn add_flat_ground(&mut self, height: f32) {
-        let body = self
-            .world
-            .insert_body(RigidBodyBuilder::fixed().translation(Vec3::new(0.0, 0.0, height - 1.0)));
-        let c = ColliderBuilder::cuboid(2000.0, 2000.0, 1.0)
-            .friction(self.cfg.ground_friction)
-            .friction_combine_rule(CoefficientCombineRule::Multiply)
-            .collision_groups(ground_groups());
-        let h = self
-            .world
-            .colliders
-            .insert_with_parent(c.build(), body, &mut self.world.bodies);
-        self.ground.push(h);
+        self.add_ground_shape(
+            SharedShape::cuboid(2000.0, 2000.0, 1.0),
+            Pose::from_translation(Vec3::new(0.0, 0.0, height - 1.0)),
+        );
     }
 
     /// Adds a prebuilt ground shape (e.g. one heightfield shared by every worker's world) at `pose`.
@@ -290,21 +282,10 @@ impl SimWorld {
             origin_x_plus(origin_xy[1], sy),
             0.0,
         );
-        let body = self
-            .world
-            .insert_body(RigidBodyBuilder::fixed().pose(Pose::from_parts(
-                centre,
-                Rot3::from_rotation_x(std::f32::consts::FRAC_PI_2),
-            )));
-        let c = ColliderBuilder::heightfield(m, Vec3::new(sx, 1.0, sy))
-            .friction(self.cfg.ground_friction)
-            .friction_combine_rule(CoefficientCombineRule::Multiply)
-            .collision_groups(ground_groups());
-        let h = self
-            .world
-            .colliders
-            .insert_with_parent(c.build(), body, &mut self.world.bodies);
-        self.ground.push(h);
+        self.add_ground_shape(
+            SharedShape::heightfield(m, Vec3::new(sx, 1.0, sy)),
+            Pose::from_parts(centre, Rot3::from_rotation_x(std::f32::consts::FRAC_PI_2)),
+        );
     }
 
     /// Adds a robot with its base at `base_pose` and joints (canonical order) at `q`; returns its index.
