@@ -22,6 +22,8 @@ pub struct Config {
     pub learner: l3p_learner::daemon::DaemonConfig,
     /// What each actor collects per policy version.
     pub rollout: RolloutConfig,
+    /// Safety settings of `l3p deploy` (watchdog, start-up ramp, damping).
+    pub deploy: l3p_deploy::SafetyConfig,
     /// Rollout actors started by `l3p train` (local mode); daemon-mode actors name their robot on the
     /// command line instead.
     pub actors: Vec<ActorSpec>,

@@ -37,7 +37,7 @@ pub fn learner_options(config: &Config, use_registry: bool) -> anyhow::Result<Le
         robots: robots
             .iter()
             .map(|r| runtime::policy_robot(config, r))
-            .collect(),
+            .collect::<anyhow::Result<_>>()?,
         use_registry,
     })
 }

@@ -6,6 +6,7 @@ pub mod actor_cmd;
 pub mod bench_cmd;
 pub mod config;
 pub mod config_cmd;
+pub mod deploy_cmd;
 pub mod eval_cmd;
 pub mod learner_cmd;
 pub mod metrics_cmd;

@@ -33,6 +33,14 @@ enum Command {
     Bench(l3p_cli::bench_cmd::BenchArgs),
     /// The artifact registry: serve it, or list/show/pull/put/tag/history/lineage.
     Registry(l3p_cli::registry_cmd::RegistryArgs),
+    /// Run a policy as a 50 Hz controller for a robot (watchdog, damping, start-up ramp).
+    Deploy(l3p_cli::deploy_cmd::DeployArgs),
+    /// Run the simulator as a stand-in robot on the deploy keys.
+    SimRobot(l3p_cli::deploy_cmd::SimRobotArgs),
+    /// Send an operator request to a running `l3p deploy`: resume, damp or stop.
+    Operate(l3p_cli::deploy_cmd::OperateArgs),
+    /// Export a policy (checkpoint or deploy artifact) as safetensors + JSON for other runtimes.
+    Export(l3p_cli::deploy_cmd::ExportArgs),
     /// Check a TOML config file: parse it strictly and print the resolved values.
     Config(l3p_cli::config_cmd::ConfigArgs),
 }
@@ -51,5 +59,9 @@ fn main() -> anyhow::Result<()> {
         Command::Registry(args) => l3p_cli::registry_cmd::run(args),
         Command::Robots(args) => l3p_cli::robots_cmd::run(args),
         Command::Bench(args) => l3p_cli::bench_cmd::run(args),
+        Command::Deploy(args) => l3p_cli::deploy_cmd::deploy(args),
+        Command::SimRobot(args) => l3p_cli::deploy_cmd::sim_robot(args),
+        Command::Operate(args) => l3p_cli::deploy_cmd::operate(args),
+        Command::Export(args) => l3p_cli::deploy_cmd::export(args),
     }
 }

@@ -52,14 +52,16 @@ pub fn obs_dim(config: &Config) -> usize {
         }
 }
 
-/// The policy's description of a robot under this config.
-pub fn policy_robot(config: &Config, robot: &Robot) -> l3p_policy::RobotSpec {
-    l3p_policy::RobotSpec {
+/// The policy's description of a robot under this config, with the controller contract
+/// ([`l3p_policy::RobotIo`]) that travels into checkpoints and deploy artifacts.
+pub fn policy_robot(config: &Config, robot: &Robot) -> anyhow::Result<l3p_policy::RobotSpec> {
+    Ok(l3p_policy::RobotSpec {
         name: robot.name.to_string(),
         obs_dim: obs_dim(config),
         action_dim: l3p_robots::catalog::NUM_JOINTS,
         action_scale: robot.action_scale,
-    }
+        io: Some(l3p_deploy::robot_io(robot, &config.env)?),
+    })
 }
 
 /// Robots of the configured actors, each once, in first-seen order.

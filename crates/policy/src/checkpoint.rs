@@ -250,6 +250,7 @@ pub fn export_bytes(
             .collect(),
         std: "std".into(),
         core_sha256: core_sha256(&model.net),
+        io: spec.io.clone(),
     };
     let mut data: Vec<(String, Vec<u8>, Vec<usize>)> = Vec::new();
     for l in &layers {

@@ -209,6 +209,94 @@ pub struct RobotSpec {
     pub action_dim: usize,
     #[serde(default = "default_action_scale")]
     pub action_scale: f32,
+    /// What a controller needs besides the weights; carried into checkpoints and exports. `None` in
+    /// checkpoints written before it existed (the deploy side then rebuilds it from the catalog).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub io: Option<RobotIo>,
+}
+
+/// The robot-side contract of a policy (IsaacLab bakes the same into its exported graph; unitree's
+/// deploy configs carry it in YAML): observation layout, joint order, default pose, gains, limits.
+/// All per-joint vectors are in the policy's joint order (`joint_names`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotIo {
+    /// Policy period (s); 0.02 = 50 Hz.
+    pub control_dt: f32,
+    pub joint_names: Vec<String>,
+    /// Joint positions (rad) that action 0 maps to: `q* = default + action_scale · clip(a)`.
+    pub default_joint_pos: Vec<f32>,
+    /// PD gains the policy was trained with: `τ = kp (q* − q) − kd q̇`.
+    pub kp: Vec<f32>,
+    pub kd: Vec<f32>,
+    /// Soft joint position limits `[lo, hi]` (rad); joint targets are clipped into them.
+    pub soft_joint_limits: Vec<[f32; 2]>,
+    /// Continuous torque limit per joint (N·m).
+    pub effort_limit: Vec<f32>,
+    /// Raw policy outputs are clipped to ±`action_clip` (non-finite outputs are a fault).
+    pub action_clip: f32,
+    /// Every observation entry is clipped to ±`obs_clip` after scaling.
+    pub obs_clip: f32,
+    /// Observation segments in order; their lengths sum to `obs_dim`.
+    pub obs_layout: Vec<ObsSegment>,
+}
+
+/// One contiguous block of the observation vector: `obs[i] = scale · quantity[i]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObsSegment {
+    pub name: String,
+    pub len: usize,
+    pub scale: f32,
+    /// Units, frame and definition.
+    pub description: String,
+}
+
+impl RobotIo {
+    /// Checks lengths against the policy's dimensions; errors name the field.
+    pub fn check(&self, obs_dim: usize, action_dim: usize) -> Result<(), String> {
+        let per_joint: [(&str, usize); 6] = [
+            ("joint_names", self.joint_names.len()),
+            ("default_joint_pos", self.default_joint_pos.len()),
+            ("kp", self.kp.len()),
+            ("kd", self.kd.len()),
+            ("soft_joint_limits", self.soft_joint_limits.len()),
+            ("effort_limit", self.effort_limit.len()),
+        ];
+        for (name, len) in per_joint {
+            if len != action_dim {
+                return Err(format!(
+                    "io.{name} has {len} entries, action_dim is {action_dim}"
+                ));
+            }
+        }
+        let total: usize = self.obs_layout.iter().map(|s| s.len).sum();
+        if total != obs_dim {
+            return Err(format!(
+                "io.obs_layout sums to {total}, obs_dim is {obs_dim}"
+            ));
+        }
+        let finite = self
+            .default_joint_pos
+            .iter()
+            .chain(&self.kp)
+            .chain(&self.kd)
+            .chain(&self.effort_limit)
+            .chain(self.soft_joint_limits.iter().flatten())
+            .chain(self.obs_layout.iter().map(|s| &s.scale))
+            .chain([&self.control_dt, &self.action_clip, &self.obs_clip])
+            .all(|v| v.is_finite());
+        if !finite {
+            return Err("io holds a non-finite number".into());
+        }
+        if self.soft_joint_limits.iter().any(|l| l[0] > l[1]) {
+            return Err("io.soft_joint_limits has lo > hi".into());
+        }
+        if !(self.control_dt > 0.0) {
+            return Err(format!("io.control_dt {} is not > 0", self.control_dt));
+        }
+        Ok(())
+    }
 }
 
 fn default_action_scale() -> f32 {
@@ -222,6 +310,7 @@ impl RobotSpec {
             obs_dim,
             action_dim,
             action_scale: default_action_scale(),
+            io: None,
         }
     }
 }

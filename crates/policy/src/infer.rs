@@ -14,14 +14,20 @@
 //!   "layers": [ { "name": "encoder.0", "in": 48, "out": 512, "activation": "elu" },
 //!               { "name": "encoder.1", "in": 512, "out": 64, "activation": "none" },
 //!               { "name": "core.0", ... }, ..., { "name": "decoder.1", ..., "activation": "none" } ],
-//!   "std": "std", "core_sha256": "…" }
+//!   "std": "std", "core_sha256": "…",
+//!   "io": { "control_dt": 0.02, "joint_names": [...], "default_joint_pos": [...], "kp": [...],
+//!           "kd": [...], "soft_joint_limits": [[lo, hi], ...], "effort_limit": [...],
+//!           "action_clip": 100.0, "obs_clip": 100.0,
+//!           "obs_layout": [ { "name": "base_lin_vel", "len": 3, "scale": 1.0, "description": "…" }, ... ] } }
 //! ```
 //!
 //! `layers` run in order: `y = act(x · Wᵀ + b)` with tensors `<name>.weight` (F32, `[out, in]`, the
 //! PyTorch `nn.Linear` layout) and `<name>.bias` (`[out]`); `activation` is `elu` (α = 1) or `none`.
 //! The result is the action mean `a`; tensor `std` (`[action_dim]`) is the Gaussian std; the robot
 //! applies `q* = q_default + action_scale · a`. `core_sha256` (L3P) hashes the core's weights so
-//! an adapter can be checked against the core it was trained with.
+//! an adapter can be checked against the core it was trained with. `io` ([`RobotIo`]) is what a
+//! controller needs to build observations and joint commands (`l3p deploy` refuses exports without it
+//! unless it can rebuild it from its own robot catalog).
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -32,6 +38,7 @@ use safetensors::SafeTensors;
 use serde::{Deserialize, Serialize};
 
 use crate::PolicyError;
+use crate::config::RobotIo;
 
 /// Format tag of the export.
 pub const EXPORT_FORMAT: &str = "l3p-export-v1";
@@ -56,6 +63,10 @@ pub struct ExportConfig {
     pub std: String,
     #[serde(default)]
     pub core_sha256: Option<String>,
+    /// Observation layout, joint order, default pose, gains and limits (see [`RobotIo`]); absent in
+    /// exports written before it existed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub io: Option<RobotIo>,
 }
 
 /// One dense layer of the exported actor.
@@ -345,4 +356,22 @@ pub(crate) fn export_metadata(
 ) -> Result<HashMap<String, String>, PolicyError> {
     let json = serde_json::to_string(config).map_err(|e| PolicyError::Export(e.to_string()))?;
     Ok(HashMap::from([(EXPORT_METADATA_KEY.to_string(), json)]))
+}
+
+/// The same export with its JSON config replaced (tensors copied unchanged), e.g. to add the
+/// robot I/O contract to an export written before it existed. The new config must describe the same
+/// tensors: the result is parsed back before it is returned.
+pub fn replace_export_config(bytes: &[u8], config: &ExportConfig) -> Result<Vec<u8>, PolicyError> {
+    let bad = |m: String| PolicyError::Export(m);
+    let st =
+        SafeTensors::deserialize(bytes).map_err(|e| bad(format!("not a safetensors file: {e}")))?;
+    let tensors: Vec<(String, safetensors::tensor::TensorView<'_>)> = st
+        .tensors()
+        .into_iter()
+        .map(|(name, view)| (name.to_string(), view))
+        .collect();
+    let out = safetensors::serialize(tensors, Some(export_metadata(config)?))
+        .map_err(|e| bad(e.to_string()))?;
+    DeployPolicy::from_bytes(&out)?;
+    Ok(out)
 }

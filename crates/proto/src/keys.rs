@@ -7,7 +7,9 @@
 //! l3p/<run>/metrics/<source>                 metrics records (JSON)
 //! l3p/<run>/actors/<robot>/<actor>           liveliness tokens
 //! l3p/registry/<op>                          registry queryables
-//! l3p/robot/<id>/state | command             deploy-time robot I/O
+//! l3p/robot/<id>/state | command             deploy-time robot I/O (binary)
+//! l3p/robot/<id>/operator                    operator requests to the deploy controller (binary)
+//! l3p/robot/<id>/deploy/status               deploy controller status (JSON)
 //! ```
 //!
 //! Names that become key segments (run, robot, actor, source, robot id) must pass
@@ -131,6 +133,16 @@ pub fn robot_command(robot_id: &str) -> String {
     format!("{ROOT}/robot/{robot_id}/command")
 }
 
+/// `l3p/robot/<id>/operator`.
+pub fn robot_operator(robot_id: &str) -> String {
+    format!("{ROOT}/robot/{robot_id}/operator")
+}
+
+/// `l3p/robot/<id>/deploy/status`.
+pub fn robot_deploy_status(robot_id: &str) -> String {
+    format!("{ROOT}/robot/{robot_id}/deploy/status")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -144,6 +156,8 @@ mod tests {
         );
         assert_eq!(actor_liveliness("r", "a1", "x"), "l3p/r/actors/a1/x");
         assert_eq!(robot_command("dog"), "l3p/robot/dog/command");
+        assert_eq!(robot_operator("dog"), "l3p/robot/dog/operator");
+        assert_eq!(robot_deploy_status("dog"), "l3p/robot/dog/deploy/status");
         assert_eq!(registry("list"), "l3p/registry/list");
     }
 

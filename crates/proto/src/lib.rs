@@ -3,7 +3,8 @@
 //!
 //! Main types: [`RolloutChunk`] (actor → learner), [`PolicyAnnounce`] and [`WeightsBlob`] (learner →
 //! actors), [`MetricsRecord`] (anyone → subscribers, JSON), the registry messages in [`registry`],
-//! [`RobotState`] and [`RobotCommand`] (robot ↔ deploy controller). Every message carries
+//! [`RobotState`] and [`RobotCommand`] (robot ↔ deploy controller), [`OperatorCommand`] and
+//! [`DeployStatus`] (operator ↔ deploy controller). Every message carries
 //! [`WIRE_VERSION`]; [`codec`] checks it before decoding the rest.
 //!
 //! Architecture invariants: key expressions are built only by [`keys`]; bytes are produced and parsed

@@ -290,3 +290,55 @@ pub struct RobotCommand {
     pub kd: Vec<f32>,
 }
 wire_message!(RobotCommand, "robot command");
+
+/// What an operator asks a running deploy controller to do (`l3p operate`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum OperatorAction {
+    /// Leave damping (after a fault or `Damp`): ramp to the default pose, then run the policy.
+    /// Refused while the fault's cause persists.
+    Resume,
+    /// Go to damping now and stay there until `Resume`.
+    Damp,
+    /// Damp, then exit the controller.
+    Stop,
+}
+
+/// An operator request on `l3p/robot/<id>/operator`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct OperatorCommand {
+    pub wire_version: u32,
+    pub robot_id: String,
+    pub action: OperatorAction,
+    /// Sender's clock, nanoseconds since the Unix epoch (for logs).
+    pub stamp_ns: u64,
+}
+wire_message!(OperatorCommand, "operator command");
+
+/// The deploy controller's status, published as JSON on `l3p/robot/<id>/deploy/status` about once a
+/// second and on every mode change (so that any Zenoh client can watch it).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DeployStatus {
+    pub wire_version: u32,
+    pub robot_id: String,
+    pub robot: String,
+    /// `name@version` of the policy being run.
+    pub policy: String,
+    pub mode: ControlMode,
+    /// Why the controller is in damping (`None` otherwise).
+    pub fault: Option<String>,
+    /// Control ticks so far.
+    pub ticks: u64,
+    /// Commands published so far.
+    pub commands: u64,
+    /// Ticks that started later than one full period after their deadline.
+    pub overruns: u64,
+    /// State messages rejected (malformed, wrong robot id or joint count, NaN).
+    pub rejected_states: u64,
+    /// |actual − nominal| tick period, microseconds: median and 99th percentile so far.
+    pub period_error_p50_us: f64,
+    pub period_error_p99_us: f64,
+    /// Policy inference (observation → action) latency, microseconds: median and 99th percentile.
+    pub inference_p50_us: f64,
+    pub inference_p99_us: f64,
+}
+wire_message!(DeployStatus, "deploy status");

@@ -333,6 +333,35 @@ impl RobotSpec {
         Ok(model.standing_height(&q))
     }
 
+    /// The task's per-robot constants: default pose, URDF joint limits (±π where the URDF has none),
+    /// soft-limit factor (0.95 ANYmal, 0.9 otherwise, as IsaacLab), action scale. Training and
+    /// deployment both build it here so that they clip to the same soft limits.
+    pub fn task_params(&self, model: &RobotModel) -> crate::task::RobotTaskParams {
+        let mut limits = [[-std::f32::consts::PI, std::f32::consts::PI]; NUM_JOINTS];
+        for (k, name) in self.joint_names.iter().enumerate() {
+            if let Some(b) = model.body_of_joint(name)
+                && let Some((lo, hi)) = model.bodies[b].joint.as_ref().and_then(|j| j.limits)
+            {
+                limits[k] = [lo, hi];
+            }
+        }
+        crate::task::RobotTaskParams {
+            name: self.name.to_string(),
+            default_joint_pos: self.default_pose,
+            joint_pos_limits: limits,
+            soft_limit_factor: if self.family == Family::Anymal {
+                0.95
+            } else {
+                0.9
+            },
+            action_scale: self.action_scale,
+            num_penalised_bodies: self
+                .penalised_links
+                .len()
+                .min(crate::task::MAX_PENALISED_BODIES),
+        }
+    }
+
     /// Reorders a canonical-order joint vector into `model.joint_names()` order (joints the spec does
     /// not name get 0).
     pub fn model_order_pose(&self, model: &RobotModel, canonical: &[f32; NUM_JOINTS]) -> Vec<f32> {

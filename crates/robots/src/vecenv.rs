@@ -22,9 +22,7 @@ use crate::catalog::{NUM_JOINTS, RobotSpec};
 use crate::config::{ConfigError, EnvConfig};
 use crate::model::RobotModel;
 use crate::sim::{RobotBinding, SimConfig, SimWorld};
-use crate::task::{
-    DoneReason, RobotState, RobotTaskParams, StepResult, Task, TaskEnvState, TaskError,
-};
+use crate::task::{DoneReason, RobotState, StepResult, Task, TaskEnvState, TaskError};
 use crate::terrain::{Curriculum, Terrain, TerrainError, TerrainType};
 use crate::urdf::UrdfError;
 
@@ -236,29 +234,7 @@ impl VecEnv {
         }
         let task_spec = cfg.resolve(spec.name)?;
         let model = spec.model()?;
-        let mut limits = [[-std::f32::consts::PI, std::f32::consts::PI]; NUM_JOINTS];
-        for (k, name) in spec.joint_names.iter().enumerate() {
-            if let Some(b) = model.body_of_joint(name)
-                && let Some((lo, hi)) = model.bodies[b].joint.as_ref().and_then(|j| j.limits)
-            {
-                limits[k] = [lo, hi];
-            }
-        }
-        let params = RobotTaskParams {
-            name: spec.name.to_string(),
-            default_joint_pos: spec.default_pose,
-            joint_pos_limits: limits,
-            soft_limit_factor: if spec.family == crate::catalog::Family::Anymal {
-                0.95
-            } else {
-                0.9
-            },
-            action_scale: spec.action_scale,
-            num_penalised_bodies: spec
-                .penalised_links
-                .len()
-                .min(crate::task::MAX_PENALISED_BODIES),
-        };
+        let params = spec.task_params(&model);
         let decimation = task_spec.decimation as usize;
         let sim_cfg = SimConfig {
             dt: task_spec.sim_dt,

@@ -28,6 +28,7 @@ fn one_iteration_from_simulator_to_updated_policy() {
         obs_dim,
         action_dim,
         action_scale: robot.action_scale,
+        io: None,
     };
     let device = l3p_policy::train_device();
     let model = init_model(Mode::L3p, policy_config, vec![spec], None, &device).unwrap();

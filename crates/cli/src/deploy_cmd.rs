@@ -1,0 +1,390 @@
+//! `l3p deploy`, `l3p sim-robot`, `l3p operate` and `l3p export`: running a policy on a robot (or
+//! the simulator standing in for one), talking to the running controller, and exporting weights for
+//! other runtimes. The work lives in `l3p_deploy`.
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::Context;
+use clap::{Args, ValueEnum};
+use l3p_deploy::{DeployOptions, SimRobotOptions};
+use l3p_policy::{ExportConfig, cpu_device};
+use l3p_proto::{
+    ControlMode, DeployStatus, OperatorAction, OperatorCommand, WIRE_VERSION, codec, keys,
+};
+use l3p_registry::RegistryClient;
+use l3p_registry::net::{ZenohSettings, open_session};
+use l3p_robots::catalog::RobotSpec as Robot;
+use l3p_robots::config::{EnvConfig, PROPRIO_OBS};
+
+use crate::config::Config;
+use crate::runtime;
+
+/// How a command joins the Zenoh network.
+#[derive(Debug, Clone, Args)]
+pub struct NetArgs {
+    /// Config file: its [zenoh] section (and [deploy] for `l3p deploy`) is used.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Zenoh endpoint to connect to (repeatable); default tcp/127.0.0.1:7447 without --config.
+    #[arg(long)]
+    pub connect: Vec<String>,
+    /// Zenoh endpoint to listen on (repeatable).
+    #[arg(long)]
+    pub listen: Vec<String>,
+}
+
+impl NetArgs {
+    fn load(&self) -> anyhow::Result<(Config, ZenohSettings)> {
+        let config = match &self.config {
+            Some(path) => Config::load(path)?,
+            None => Config::default(),
+        };
+        let mut zenoh = config.zenoh.clone();
+        if self.config.is_none() {
+            zenoh.multicast_scouting = false;
+            zenoh.connect = vec!["tcp/127.0.0.1:7447".into()];
+        }
+        if !self.connect.is_empty() {
+            zenoh.connect = self.connect.clone();
+        }
+        if !self.listen.is_empty() {
+            zenoh.listen = self.listen.clone();
+        }
+        Ok((config, zenoh))
+    }
+}
+
+#[derive(Debug, Args)]
+pub struct DeployArgs {
+    /// Robot model (from `l3p robots list`).
+    #[arg(long)]
+    pub robot: String,
+    /// Robot instance id: the `<id>` of `l3p/robot/<id>/state|command`.
+    #[arg(long)]
+    pub robot_id: String,
+    /// Deploy artifact `name@version|alias` from the registry (e.g. `a1-flat-a1@latest`), or an
+    /// export file / directory.
+    #[arg(long)]
+    pub policy: String,
+    /// Stop (through damping) after this many seconds; default: until Ctrl-C / SIGTERM.
+    #[arg(long)]
+    pub duration: Option<f64>,
+    #[command(flatten)]
+    pub net: NetArgs,
+}
+
+pub fn deploy(args: DeployArgs) -> anyhow::Result<()> {
+    let (config, zenoh) = args.net.load()?;
+    let robot = Robot::by_name(&args.robot)?;
+    keys::validate_segment("robot id", &args.robot_id)?;
+    config
+        .deploy
+        .validate()
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let rt = runtime::tokio_runtime()?;
+    rt.block_on(async {
+        let session = open_session(&zenoh).await?;
+        let path = Path::new(&args.policy);
+        let loaded = if path.exists() {
+            l3p_deploy::read_policy_file(path, robot)?
+        } else {
+            let client = RegistryClient::new(&session);
+            l3p_deploy::fetch_policy(&client, &args.policy, robot).await?.1
+        };
+        if loaded.io_from_catalog {
+            tracing::warn!(
+                "{} carries no robot I/O contract (older export): using this build's {} catalog entry",
+                loaded.reference,
+                robot.name
+            );
+        }
+        eprintln!(
+            "deploying {} (sha256 {}) on {} as robot id {}",
+            loaded.reference, loaded.sha256, robot.name, args.robot_id
+        );
+        let cancel = runtime::cancel_on_signal();
+        let opts = DeployOptions {
+            robot,
+            robot_id: args.robot_id.clone(),
+            safety: config.deploy.clone(),
+            duration: args.duration.map(Duration::from_secs_f64),
+            status_every: Duration::from_secs(1),
+        };
+        let status = l3p_deploy::run_deploy(&session, loaded, opts, cancel).await?;
+        println!("{}", serde_json::to_string(&status)?);
+        let _ = session.close().await;
+        Ok(())
+    })
+}
+
+#[derive(Debug, Args)]
+pub struct SimRobotArgs {
+    /// Robot model to simulate.
+    #[arg(long)]
+    pub robot: String,
+    /// Robot instance id for the keys.
+    #[arg(long)]
+    pub robot_id: String,
+    /// State publication rate (Hz): 200 or 50.
+    #[arg(long, default_value_t = 200)]
+    pub state_hz: u32,
+    /// Operator velocity command sent with every state: vx,vy,yaw_rate.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        num_args = 1,
+        default_value = "0,0,0",
+        allow_hyphen_values = true
+    )]
+    pub command: Vec<f32>,
+    /// Stop after this many seconds; default: until Ctrl-C / SIGTERM.
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// The robot-side watchdog: no command for this long → damping.
+    #[arg(long, default_value_t = 0.1)]
+    pub command_timeout: f32,
+    #[command(flatten)]
+    pub net: NetArgs,
+}
+
+pub fn sim_robot(args: SimRobotArgs) -> anyhow::Result<()> {
+    let (_, zenoh) = args.net.load()?;
+    let robot = Robot::by_name(&args.robot)?;
+    let command: [f32; 3] = args.command.as_slice().try_into().map_err(|_| {
+        anyhow::anyhow!(
+            "--command takes three numbers vx,vy,yaw_rate, got {:?}",
+            args.command
+        )
+    })?;
+    if !(args.command_timeout.is_finite() && args.command_timeout > 0.0) {
+        anyhow::bail!("--command-timeout must be > 0 seconds");
+    }
+    let rt = runtime::tokio_runtime()?;
+    rt.block_on(async {
+        let session = open_session(&zenoh).await?;
+        let cancel = runtime::cancel_on_signal();
+        let opts = SimRobotOptions {
+            robot,
+            robot_id: args.robot_id.clone(),
+            state_hz: args.state_hz,
+            command,
+            duration: args.duration.map(Duration::from_secs_f64),
+            command_timeout_s: args.command_timeout,
+        };
+        let summary = l3p_deploy::run_sim_robot(&session, opts, cancel).await?;
+        println!("{}", serde_json::to_string(&summary)?);
+        let _ = session.close().await;
+        Ok(())
+    })
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OperateAction {
+    /// Leave damping: ramp to the default pose, then run the policy.
+    Resume,
+    /// Damp now and stay damped.
+    Damp,
+    /// Damp, then stop the controller.
+    Stop,
+}
+
+#[derive(Debug, Args)]
+pub struct OperateArgs {
+    /// Robot instance id of the running `l3p deploy`.
+    #[arg(long)]
+    pub robot_id: String,
+    pub action: OperateAction,
+    /// Give up waiting for the controller's confirmation after this many seconds.
+    #[arg(long, default_value_t = 3.0)]
+    pub timeout: f64,
+    #[command(flatten)]
+    pub net: NetArgs,
+}
+
+/// Sends the request until the controller's status shows it took effect (pub/sub is
+/// fire-and-forget, and every request is idempotent), then prints the status.
+pub fn operate(args: OperateArgs) -> anyhow::Result<()> {
+    let (_, zenoh) = args.net.load()?;
+    keys::validate_segment("robot id", &args.robot_id)?;
+    let action = match args.action {
+        OperateAction::Resume => OperatorAction::Resume,
+        OperateAction::Damp => OperatorAction::Damp,
+        OperateAction::Stop => OperatorAction::Stop,
+    };
+    let done = |s: &DeployStatus| match action {
+        OperatorAction::Resume => s.mode == ControlMode::Ramp || s.mode == ControlMode::Policy,
+        OperatorAction::Damp | OperatorAction::Stop => s.mode == ControlMode::Damping,
+    };
+    let rt = runtime::tokio_runtime()?;
+    rt.block_on(async {
+        let session = open_session(&zenoh).await?;
+        let status = session
+            .declare_subscriber(keys::robot_deploy_status(&args.robot_id))
+            .await
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let request = codec::encode(&OperatorCommand {
+            wire_version: WIRE_VERSION,
+            robot_id: args.robot_id.clone(),
+            action,
+            stamp_ns: 0,
+        })?;
+        let deadline = tokio::time::Instant::now() + Duration::from_secs_f64(args.timeout);
+        let mut last: Option<DeployStatus> = None;
+        while tokio::time::Instant::now() < deadline {
+            session
+                .put(keys::robot_operator(&args.robot_id), request.clone())
+                .await
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let wait = tokio::time::sleep(Duration::from_millis(400));
+            tokio::pin!(wait);
+            loop {
+                tokio::select! {
+                    _ = &mut wait => break,
+                    sample = status.recv_async() => {
+                        let Ok(sample) = sample else { break };
+                        if let Ok(s) = codec::decode_json::<DeployStatus>(&sample.payload().to_bytes()) {
+                            if done(&s) {
+                                println!("{}", serde_json::to_string(&s)?);
+                                let _ = session.close().await;
+                                return Ok(());
+                            }
+                            last = Some(s);
+                        }
+                    }
+                }
+            }
+        }
+        let _ = session.close().await;
+        match last {
+            Some(s) => anyhow::bail!(
+                "{:?} had no effect: controller {} is in {:?}{}",
+                args.action,
+                args.robot_id,
+                s.mode,
+                s.fault.map(|f| format!(" ({f})")).unwrap_or_default()
+            ),
+            None => anyhow::bail!(
+                "no deploy controller answered for robot id {} within {} s\nhint: is `l3p deploy --robot-id {}` running and connected to the same Zenoh network?",
+                args.robot_id,
+                args.timeout,
+                args.robot_id
+            ),
+        }
+    })
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ExportFormat {
+    /// safetensors weights + JSON config (PyTorch / numpy loadable).
+    Safetensors,
+}
+
+#[derive(Debug, Args)]
+pub struct ExportArgs {
+    /// What to export: a registry ref (`name@version|alias`: a deploy artifact or a checkpoint), a
+    /// checkpoint file (`latest.ckpt`), or an export file/directory.
+    pub source: String,
+    #[arg(long, value_enum, default_value = "safetensors")]
+    pub format: ExportFormat,
+    /// Output directory: policy.safetensors + policy.json.
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Robot to export (needed when a checkpoint serves several robots).
+    #[arg(long)]
+    pub robot: Option<String>,
+    /// Read the registry at `<dir>/registry.db` directly instead of asking a service.
+    #[arg(long)]
+    pub data: Option<PathBuf>,
+    #[command(flatten)]
+    pub net: NetArgs,
+}
+
+const CHECKPOINT_MAGIC: &[u8] = b"L3PCKPT1";
+
+pub fn export(args: ExportArgs) -> anyhow::Result<()> {
+    let ExportFormat::Safetensors = args.format;
+    let (config, zenoh) = args.net.load()?;
+    let path = Path::new(&args.source);
+    let bytes = if path.exists() {
+        let file = if path.is_dir() {
+            path.join("policy.safetensors")
+        } else {
+            path.to_path_buf()
+        };
+        std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?
+    } else if let Some(data) = &args.data {
+        l3p_registry::Registry::open(data)?
+            .get_blob(&args.source)?
+            .1
+    } else {
+        let rt = runtime::tokio_runtime()?;
+        rt.block_on(async {
+            let session = open_session(&zenoh).await?;
+            let blob = RegistryClient::new(&session).get_blob(&args.source).await;
+            let _ = session.close().await;
+            anyhow::Ok(blob?.1)
+        })?
+    };
+    let env_for = |obs_dim: usize| EnvConfig {
+        height_scan: obs_dim != PROPRIO_OBS,
+        ..config.env.clone()
+    };
+    let (export, export_config) = if bytes.starts_with(CHECKPOINT_MAGIC) {
+        let mut ckpt = l3p_policy::checkpoint_from_bytes(&bytes, &cpu_device())?;
+        let names: Vec<String> = ckpt.model.robots.iter().map(|r| r.name.clone()).collect();
+        let name = match (&args.robot, names.as_slice()) {
+            (Some(r), _) => Robot::by_name(r)?.name.to_string(),
+            (None, [only]) => only.clone(),
+            (None, _) => {
+                anyhow::bail!("the checkpoint serves {names:?}\nhint: choose one with --robot")
+            }
+        };
+        let idx = names
+            .iter()
+            .position(|n| *n == name)
+            .ok_or_else(|| anyhow::anyhow!("the checkpoint has no {name} (it has {names:?})"))?;
+        let spec = &mut ckpt.model.robots[idx];
+        if spec.io.is_none() {
+            spec.io = Some(l3p_deploy::robot_io(
+                Robot::by_name(&name)?,
+                &env_for(spec.obs_dim),
+            )?);
+        }
+        l3p_policy::export_bytes(&ckpt.model, &name)?
+    } else {
+        let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
+        let mut cfg: ExportConfig = policy.config.clone();
+        if let Some(r) = &args.robot
+            && Robot::by_name(r)?.name != cfg.robot
+        {
+            anyhow::bail!("{} is a policy for {}, not {r}", args.source, cfg.robot);
+        }
+        if cfg.io.is_none() {
+            cfg.io = Some(l3p_deploy::robot_io(
+                Robot::by_name(&cfg.robot)?,
+                &env_for(cfg.obs_dim),
+            )?);
+            (l3p_policy::replace_export_config(&bytes, &cfg)?, cfg)
+        } else {
+            (bytes, cfg)
+        }
+    };
+    std::fs::create_dir_all(&args.output)
+        .with_context(|| format!("creating {}", args.output.display()))?;
+    let st = args.output.join("policy.safetensors");
+    let json = args.output.join("policy.json");
+    std::fs::write(&st, &export).with_context(|| format!("writing {}", st.display()))?;
+    std::fs::write(&json, serde_json::to_vec_pretty(&export_config)?)
+        .with_context(|| format!("writing {}", json.display()))?;
+    println!(
+        "exported {} policy for {} ({} → {}): {} and {}",
+        export_config.arch,
+        export_config.robot,
+        export_config.obs_dim,
+        export_config.action_dim,
+        st.display(),
+        json.display()
+    );
+    Ok(())
+}

@@ -1,0 +1,187 @@
+//! The robot I/O contract of a policy: [`robot_io`] builds it from the robot catalog and the env
+//! config (training and `l3p export` call it), [`ObservationBuilder`] turns a wire [`RobotState`] into
+//! the policy's observation exactly as the training task does (`l3p_robots::task::Task::observe` with
+//! noise off — a test compares the two).
+
+use l3p_policy::{ObsSegment, RobotIo};
+use l3p_proto::RobotState;
+use l3p_robots::catalog::RobotSpec;
+use l3p_robots::config::{EnvConfig, HEIGHT_SCAN_OBS};
+use l3p_robots::task::projected_gravity;
+
+use crate::DeployError;
+
+/// Segment names of the proprioceptive observation, in training order (`Task::observe`).
+pub const PROPRIO_SEGMENTS: [&str; 7] = [
+    "base_lin_vel",
+    "base_ang_vel",
+    "projected_gravity",
+    "velocity_command",
+    "joint_pos_rel",
+    "joint_vel",
+    "last_action",
+];
+
+/// The I/O contract of `robot` trained under `env`: observation layout (IsaacLab's, unscaled),
+/// training gains, default pose, soft limits, clips, control period.
+pub fn robot_io(robot: &RobotSpec, env: &EnvConfig) -> Result<RobotIo, DeployError> {
+    let model = robot
+        .model()
+        .map_err(|e| DeployError::Robot(e.to_string()))?;
+    let params = robot.task_params(&model);
+    let n = robot.joint_names.len();
+    let seg = |name: &str, len: usize, description: &str| ObsSegment {
+        name: name.into(),
+        len,
+        scale: 1.0,
+        description: description.into(),
+    };
+    let mut obs_layout = vec![
+        seg(
+            PROPRIO_SEGMENTS[0],
+            3,
+            "base linear velocity in the base frame (x forward, y left, z up), m/s",
+        ),
+        seg(
+            PROPRIO_SEGMENTS[1],
+            3,
+            "base angular velocity in the base frame (IMU gyro), rad/s",
+        ),
+        seg(
+            PROPRIO_SEGMENTS[2],
+            3,
+            "unit gravity vector in the base frame (0, 0, -1 when level), from the base quaternion",
+        ),
+        seg(
+            PROPRIO_SEGMENTS[3],
+            3,
+            "commanded (vx m/s, vy m/s, yaw rate rad/s) in the base frame",
+        ),
+        seg(
+            PROPRIO_SEGMENTS[4],
+            n,
+            "joint positions minus default_joint_pos, rad, joint_names order",
+        ),
+        seg(PROPRIO_SEGMENTS[5], n, "joint velocities, rad/s"),
+        seg(
+            PROPRIO_SEGMENTS[6],
+            n,
+            "the previous action after clipping to ±action_clip (0 at start)",
+        ),
+    ];
+    if env.height_scan {
+        obs_layout.push(seg(
+            "height_scan",
+            HEIGHT_SCAN_OBS,
+            "clip(base_z − terrain_height − 0.5, −1, 1) on IsaacLab's 1.6 m × 1.0 m grid (0.1 m), yaw-aligned",
+        ));
+    }
+    Ok(RobotIo {
+        control_dt: env.sim_dt * env.decimation as f32,
+        joint_names: robot.joint_names.iter().map(|s| s.to_string()).collect(),
+        default_joint_pos: robot.default_pose.to_vec(),
+        kp: vec![robot.training_gains.kp; n],
+        kd: vec![robot.training_gains.kd; n],
+        soft_joint_limits: params.soft_limits().to_vec(),
+        effort_limit: robot.effort_limit.to_vec(),
+        action_clip: env.action_clip,
+        obs_clip: env.obs_clip,
+        obs_layout,
+    })
+}
+
+/// Builds observations from wire states for one policy's layout. Only proprioceptive layouts are
+/// deployable (no terrain sensing on the robot side yet).
+#[derive(Debug, Clone)]
+pub struct ObservationBuilder {
+    segments: Vec<(Segment, usize, f32)>,
+    default_joint_pos: Vec<f32>,
+    obs_clip: f32,
+    obs_dim: usize,
+}
+
+#[derive(Debug, Clone, Copy)]
+enum Segment {
+    LinVel,
+    AngVel,
+    Gravity,
+    Command,
+    JointPos,
+    JointVel,
+    LastAction,
+}
+
+impl ObservationBuilder {
+    /// Checks that every segment is known and sized for the robot.
+    pub fn new(io: &RobotIo) -> Result<Self, DeployError> {
+        let joints = io.joint_names.len();
+        let mut segments = Vec::new();
+        for s in &io.obs_layout {
+            let (kind, len) = match s.name.as_str() {
+                "base_lin_vel" => (Segment::LinVel, 3),
+                "base_ang_vel" => (Segment::AngVel, 3),
+                "projected_gravity" => (Segment::Gravity, 3),
+                "velocity_command" => (Segment::Command, 3),
+                "joint_pos_rel" => (Segment::JointPos, joints),
+                "joint_vel" => (Segment::JointVel, joints),
+                "last_action" => (Segment::LastAction, joints),
+                "height_scan" => {
+                    return Err(DeployError::Policy(
+                        "the policy observes a terrain height scan; deploy runs blind \
+                         (proprioceptive) policies only\nhint: train with [env] height_scan = false"
+                            .into(),
+                    ));
+                }
+                other => {
+                    return Err(DeployError::Policy(format!(
+                        "unknown observation segment {other:?}"
+                    )));
+                }
+            };
+            if s.len != len {
+                return Err(DeployError::Policy(format!(
+                    "observation segment {} has length {}, expected {len}",
+                    s.name, s.len
+                )));
+            }
+            segments.push((kind, len, s.scale));
+        }
+        Ok(Self {
+            segments,
+            default_joint_pos: io.default_joint_pos.clone(),
+            obs_clip: io.obs_clip,
+            obs_dim: io.obs_layout.iter().map(|s| s.len).sum(),
+        })
+    }
+
+    pub fn obs_dim(&self) -> usize {
+        self.obs_dim
+    }
+
+    /// Writes the observation of `state` (already validated: finite, right joint count) and the
+    /// previous action into `out` (`obs_dim` long).
+    pub fn build(&self, state: &RobotState, last_action: &[f32], out: &mut [f32]) {
+        let gravity = projected_gravity(state.base_quat);
+        let mut i = 0;
+        for &(kind, len, scale) in &self.segments {
+            for k in 0..len {
+                let x = match kind {
+                    Segment::LinVel => state.base_lin_vel[k],
+                    Segment::AngVel => state.base_ang_vel[k],
+                    Segment::Gravity => gravity[k],
+                    Segment::Command => state.command[k],
+                    Segment::JointPos => state.joint_pos[k] - self.default_joint_pos[k],
+                    Segment::JointVel => state.joint_vel[k],
+                    Segment::LastAction => last_action[k],
+                };
+                let v = scale * x;
+                out[i] = if v.is_nan() {
+                    0.0
+                } else {
+                    v.clamp(-self.obs_clip, self.obs_clip)
+                };
+                i += 1;
+            }
+        }
+    }
+}

@@ -1,0 +1,281 @@
+//! `l3p sim-robot` ([`run_sim_robot`]): the rapier simulator standing in for a real robot behind
+//! its vendor-SDK bridge, on the same keys, so that the deploy path is testable without hardware.
+//!
+//! It steps physics in real time at the training rate (200 Hz), publishes [`RobotState`] at 200 or
+//! 50 Hz on `l3p/robot/<id>/state`, and applies the latest [`RobotCommand`] from
+//! `l3p/robot/<id>/command` as a joint PD (`τ = kp (q* − q) − kd q̇`, clipped like training). Like a
+//! robot's low-level controller it owns a second watchdog: no command for `command_timeout_s` →
+//! damping with the robot's training kd. Before the first command the joints are limp.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use l3p_proto::{ControlMode, RobotCommand, RobotState, WIRE_VERSION, codec, keys};
+use l3p_robots::actuator::Actuator;
+use l3p_robots::catalog::{Gains, NUM_JOINTS, RobotSpec};
+use l3p_robots::sim::{RobotBinding, SimConfig, SimWorld};
+use l3p_robots::task::{RobotState as SimState, projected_gravity};
+use rapier3d::math::{Pose, Vec3};
+use serde::{Deserialize, Serialize};
+use tokio_util::sync::CancellationToken;
+use tracing::{info, warn};
+use zenoh::Wait;
+use zenoh::qos::{CongestionControl, Priority};
+
+use crate::DeployError;
+use crate::pacer::Pacer;
+
+#[derive(Debug, Clone)]
+pub struct SimRobotOptions {
+    pub robot: &'static RobotSpec,
+    pub robot_id: String,
+    /// State publication rate: 200 (every physics step) or 50.
+    pub state_hz: u32,
+    /// The operator's velocity command `(vx, vy, yaw rate)` sent in every state.
+    pub command: [f32; 3],
+    /// Stop after this long; `None`: until cancelled.
+    pub duration: Option<Duration>,
+    /// No command for this long → damping.
+    pub command_timeout_s: f32,
+}
+
+/// What happened, printed as JSON when `l3p sim-robot` exits.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SimRobotSummary {
+    pub robot: String,
+    pub seconds: f64,
+    pub states_published: u64,
+    pub commands_received: u64,
+    pub commands_rejected: u64,
+    /// Physics steps spent under each mode of the applied command.
+    pub steps_zero_torque: u64,
+    pub steps_ramp: u64,
+    pub steps_policy: u64,
+    pub steps_damping: u64,
+    /// Times the robot-side command watchdog fired.
+    pub command_timeouts: u64,
+    /// Seconds under policy commands.
+    pub policy_seconds: f64,
+    /// Lowest base height (m) and largest tilt (degrees) while under policy commands.
+    pub policy_min_base_height: f32,
+    pub policy_max_tilt_deg: f32,
+    /// Base displacement (world x, y) while under policy commands, and mean forward speed.
+    pub policy_displacement: [f32; 2],
+    pub policy_mean_forward_velocity: f32,
+    /// Nominal standing height of the robot (m), for scale.
+    pub nominal_base_height: f32,
+}
+
+type CommandSlot = Arc<Mutex<Option<(RobotCommand, Instant)>>>;
+
+/// Runs the stand-in robot until cancelled or `opts.duration` has passed.
+pub async fn run_sim_robot(
+    session: &zenoh::Session,
+    opts: SimRobotOptions,
+    cancel: CancellationToken,
+) -> Result<SimRobotSummary, DeployError> {
+    keys::validate_segment("robot id", &opts.robot_id)
+        .map_err(|e| DeployError::Config(e.to_string()))?;
+    if !matches!(opts.state_hz, 50 | 200) {
+        return Err(DeployError::Config(format!(
+            "state rate {} Hz: expected 50 or 200",
+            opts.state_hz
+        )));
+    }
+    let zerr = |e: zenoh::Error| DeployError::Zenoh(e.to_string());
+    let slot: CommandSlot = Arc::new(Mutex::new(None));
+    let rejected = Arc::new(AtomicU64::new(0));
+    let received = Arc::new(AtomicU64::new(0));
+    let sub = {
+        let (slot, rejected, received) = (slot.clone(), rejected.clone(), received.clone());
+        let robot_id = opts.robot_id.clone();
+        session
+            .declare_subscriber(keys::robot_command(&opts.robot_id))
+            .callback(move |sample| {
+                let at = Instant::now();
+                let cmd = codec::decode::<RobotCommand>(&sample.payload().to_bytes())
+                    .map_err(|e| e.to_string())
+                    .and_then(|c| {
+                        c.validate(NUM_JOINTS)
+                            .map(|()| c)
+                            .map_err(|e| e.to_string())
+                    })
+                    .and_then(|c| {
+                        if c.robot_id == robot_id {
+                            Ok(c)
+                        } else {
+                            Err(format!("command for robot id {:?}", c.robot_id))
+                        }
+                    });
+                match cmd {
+                    Ok(c) => {
+                        received.fetch_add(1, Ordering::Relaxed);
+                        if let Ok(mut s) = slot.lock() {
+                            *s = Some((c, at));
+                        }
+                    }
+                    Err(e) => {
+                        let n = rejected.fetch_add(1, Ordering::Relaxed) + 1;
+                        if n.is_power_of_two() {
+                            warn!(rejected = n, "rejected robot command: {e}");
+                        }
+                    }
+                }
+            })
+            .await
+            .map_err(zerr)?
+    };
+    let states = session
+        .declare_publisher(keys::robot_state(&opts.robot_id))
+        .priority(Priority::RealTime)
+        .express(true)
+        .congestion_control(CongestionControl::Drop)
+        .await
+        .map_err(zerr)?;
+
+    let robot = opts.robot;
+    let model = robot
+        .model()
+        .map_err(|e| DeployError::Robot(e.to_string()))?;
+    let cfg = SimConfig::default();
+    let mut sim = SimWorld::new(cfg);
+    sim.add_flat_ground(0.0);
+    let nominal = model.standing_height(&robot.model_order_pose(&model, &robot.default_pose));
+    let limp = Actuator::from_spec(robot, Gains { kp: 0.0, kd: 0.0 });
+    sim.add_robot(
+        &model,
+        &RobotBinding::from_spec(robot),
+        limp,
+        Pose::from_translation(Vec3::new(0.0, 0.0, nominal + 0.02)),
+        &robot.default_pose,
+    )
+    .map_err(|e| DeployError::Robot(e.to_string()))?;
+    info!(
+        robot = robot.name,
+        robot_id = %opts.robot_id,
+        state_hz = opts.state_hz,
+        "sim-robot up: joints limp until the first command"
+    );
+
+    let (received_c, rejected_c) = (received.clone(), rejected.clone());
+    let summary = tokio::task::spawn_blocking(move || {
+        let physics_dt = Duration::from_secs_f32(cfg.dt);
+        let publish_every = (200 / opts.state_hz) as u64;
+        let mut pacer = Pacer::new(physics_dt);
+        let start = Instant::now();
+        let mut summary = SimRobotSummary {
+            robot: robot.name.into(),
+            policy_min_base_height: f32::INFINITY,
+            nominal_base_height: nominal,
+            ..Default::default()
+        };
+        let mut state = SimState::default();
+        let mut applied_seq = None;
+        let mut timed_out = false;
+        let mut policy_start: Option<[f32; 3]> = None;
+        let mut seq = 0u64;
+        let mut step = 0u64;
+        let timeout = Duration::from_secs_f32(opts.command_timeout_s);
+        while !cancel.is_cancelled() && opts.duration.is_none_or(|d| start.elapsed() < d) {
+            let (now, _) = pacer.wait();
+            let latest = slot.lock().ok().and_then(|s| s.clone());
+            let mut mode = ControlMode::ZeroTorque;
+            if let Some((cmd, at)) = latest {
+                if now.saturating_duration_since(at) > timeout {
+                    if !timed_out {
+                        timed_out = true;
+                        summary.command_timeouts += 1;
+                        warn!("no command for {:?}: damping", timeout);
+                        let damp = Actuator::from_spec(
+                            robot,
+                            Gains {
+                                kp: 0.0,
+                                kd: robot.training_gains.kd,
+                            },
+                        );
+                        sim.set_actuator(0, damp);
+                    }
+                    mode = ControlMode::Damping;
+                } else {
+                    timed_out = false;
+                    mode = cmd.mode;
+                    if applied_seq != Some(cmd.seq) {
+                        applied_seq = Some(cmd.seq);
+                        let mut act = limp;
+                        act.kp.copy_from_slice(&cmd.kp);
+                        act.kd.copy_from_slice(&cmd.kd);
+                        sim.set_actuator(0, act);
+                        let mut q = [0.0; NUM_JOINTS];
+                        q.copy_from_slice(&cmd.joint_pos_target);
+                        sim.set_targets(0, &q);
+                    }
+                }
+            }
+            sim.step();
+            sim.read_state(0, &mut state);
+            step += 1;
+            match mode {
+                ControlMode::ZeroTorque => summary.steps_zero_torque += 1,
+                ControlMode::Ramp => summary.steps_ramp += 1,
+                ControlMode::Policy => summary.steps_policy += 1,
+                ControlMode::Damping => summary.steps_damping += 1,
+            }
+            if mode == ControlMode::Policy {
+                let start_pos = *policy_start.get_or_insert(state.base_pos);
+                summary.policy_seconds += cfg.dt as f64;
+                summary.policy_min_base_height =
+                    summary.policy_min_base_height.min(state.base_pos[2]);
+                let g = projected_gravity(state.base_quat);
+                let tilt = (-g[2]).clamp(-1.0, 1.0).acos().to_degrees();
+                summary.policy_max_tilt_deg = summary.policy_max_tilt_deg.max(tilt);
+                summary.policy_displacement = [
+                    state.base_pos[0] - start_pos[0],
+                    state.base_pos[1] - start_pos[1],
+                ];
+            }
+            if step.is_multiple_of(publish_every) {
+                seq += 1;
+                let msg = RobotState {
+                    wire_version: WIRE_VERSION,
+                    robot_id: opts.robot_id.clone(),
+                    seq,
+                    stamp_ns: std::time::SystemTime::now()
+                        .duration_since(std::time::UNIX_EPOCH)
+                        .map(|d| d.as_nanos() as u64)
+                        .unwrap_or(0),
+                    base_quat: state.base_quat,
+                    base_lin_vel: state.lin_vel_b(),
+                    base_ang_vel: state.ang_vel_b(),
+                    joint_pos: state.joint_pos.to_vec(),
+                    joint_vel: state.joint_vel.to_vec(),
+                    command: opts.command,
+                };
+                match codec::encode(&msg) {
+                    Ok(bytes) => {
+                        if states.put(bytes).wait().is_ok() {
+                            summary.states_published += 1;
+                        }
+                    }
+                    Err(e) => warn!("cannot encode state: {e}"),
+                }
+            }
+        }
+        summary.seconds = start.elapsed().as_secs_f64();
+        if summary.policy_seconds > 0.0 {
+            summary.policy_mean_forward_velocity =
+                summary.policy_displacement[0] / summary.policy_seconds as f32;
+        } else {
+            summary.policy_min_base_height = 0.0;
+        }
+        summary
+    })
+    .await
+    .map_err(|e| DeployError::Config(format!("sim-robot thread: {e}")))?;
+    drop(sub);
+    Ok(SimRobotSummary {
+        commands_received: received_c.load(Ordering::Relaxed),
+        commands_rejected: rejected_c.load(Ordering::Relaxed),
+        ..summary
+    })
+}

@@ -1,0 +1,452 @@
+//! The deploy controller tick by tick (no I/O, injected clock): observations equal training's, the
+//! start-up sequence, every watchdog path, latched damping and the soft-limit clip; and artifact
+//! checks refuse what does not fit the robot.
+
+use l3p_deploy::controller::{Latest, PolicyFn};
+use l3p_deploy::{Controller, Fault, ObservationBuilder, SafetyConfig, load_policy, robot_io};
+use l3p_policy::RobotIo;
+use l3p_proto::{ControlMode, OperatorAction, RobotState, WIRE_VERSION};
+use l3p_robots::catalog::RobotSpec;
+use l3p_robots::config::{EnvConfig, TerrainPreset};
+use l3p_robots::task::{Task, TaskEnvState, quat_from_yaw, quat_rotate_inverse};
+use l3p_robots::terrain::Terrain;
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+
+const DT: f64 = 0.02;
+
+fn a1() -> &'static RobotSpec {
+    RobotSpec::by_name("a1").unwrap()
+}
+
+fn flat_env() -> EnvConfig {
+    let mut env = EnvConfig::default();
+    env.height_scan = false;
+    env.terrain.preset = TerrainPreset::Flat;
+    env
+}
+
+fn a1_io() -> RobotIo {
+    robot_io(a1(), &flat_env()).unwrap()
+}
+
+fn standing(io: &RobotIo) -> RobotState {
+    RobotState {
+        wire_version: WIRE_VERSION,
+        robot_id: "dog".into(),
+        seq: 1,
+        stamp_ns: 0,
+        base_quat: [1.0, 0.0, 0.0, 0.0],
+        base_lin_vel: [0.0; 3],
+        base_ang_vel: [0.0; 3],
+        joint_pos: io.default_joint_pos.clone(),
+        joint_vel: vec![0.0; 12],
+        command: [0.5, 0.0, 0.0],
+    }
+}
+
+/// A policy returning a fixed action (or NaN), counting its calls.
+struct Fixed {
+    action: f32,
+    calls: usize,
+}
+
+impl PolicyFn for Fixed {
+    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+        assert_eq!(obs.len(), 48);
+        self.calls += 1;
+        action.iter_mut().for_each(|a| *a = self.action);
+    }
+}
+
+#[test]
+fn observation_matches_the_training_task() {
+    let env = flat_env();
+    let robot = a1();
+    let spec = env.resolve("a1").unwrap();
+    let terrain = Terrain::generate(&spec.terrain).unwrap();
+    let mut task = Task::new(spec, robot.task_params(&robot.model().unwrap())).unwrap();
+    task.spec.noise.enabled = false;
+    let io = a1_io();
+    let builder = ObservationBuilder::new(&io).unwrap();
+    let mut rng = StdRng::seed_from_u64(3);
+    for _ in 0..20 {
+        let mut sim = l3p_robots::task::RobotState::default();
+        sim.base_quat = quat_from_yaw(rng.random_range(-3.0..3.0));
+        // Add some roll/pitch too: q = yaw ⊗ small tilt, normalised.
+        let (r, p) = (
+            rng.random_range(-0.3f32..0.3),
+            rng.random_range(-0.3f32..0.3),
+        );
+        let q = sim.base_quat;
+        let t = [1.0, 0.5 * r, 0.5 * p, 0.0];
+        let mut m = [
+            q[0] * t[0] - q[1] * t[1] - q[2] * t[2] - q[3] * t[3],
+            q[0] * t[1] + q[1] * t[0] + q[2] * t[3] - q[3] * t[2],
+            q[0] * t[2] - q[1] * t[3] + q[2] * t[0] + q[3] * t[1],
+            q[0] * t[3] + q[1] * t[2] - q[2] * t[1] + q[3] * t[0],
+        ];
+        let n = m.iter().map(|v| v * v).sum::<f32>().sqrt();
+        m.iter_mut().for_each(|v| *v /= n);
+        sim.base_quat = m;
+        for k in 0..3 {
+            sim.base_lin_vel_w[k] = rng.random_range(-1.0..1.0);
+            sim.base_ang_vel_w[k] = rng.random_range(-2.0..2.0);
+        }
+        for j in 0..12 {
+            sim.joint_pos[j] = io.default_joint_pos[j] + rng.random_range(-0.5..0.5);
+            sim.joint_vel[j] = rng.random_range(-10.0..10.0);
+        }
+        let mut env_state = TaskEnvState::new();
+        env_state.command.vx = rng.random_range(-1.0..1.0);
+        env_state.command.vy = rng.random_range(-1.0..1.0);
+        env_state.command.wz = rng.random_range(-1.0..1.0);
+        for a in &mut env_state.last_action {
+            *a = rng.random_range(-2.0..2.0);
+        }
+        let mut expected = vec![0.0; 48];
+        task.observe(&env_state, &sim, &terrain, &mut rng, &mut expected)
+            .unwrap();
+
+        // What a robot bridge sends: velocities in the base frame.
+        let wire = RobotState {
+            base_quat: sim.base_quat,
+            base_lin_vel: quat_rotate_inverse(sim.base_quat, sim.base_lin_vel_w),
+            base_ang_vel: quat_rotate_inverse(sim.base_quat, sim.base_ang_vel_w),
+            joint_pos: sim.joint_pos.to_vec(),
+            joint_vel: sim.joint_vel.to_vec(),
+            command: env_state.command.as_array(),
+            ..standing(&io)
+        };
+        let mut got = vec![0.0; 48];
+        builder.build(&wire, &env_state.last_action, &mut got);
+        for (i, (g, e)) in got.iter().zip(&expected).enumerate() {
+            assert!((g - e).abs() < 1e-5, "obs[{i}]: deploy {g} vs training {e}");
+        }
+    }
+}
+
+#[test]
+fn startup_goes_zero_torque_then_ramp_then_policy() {
+    let io = a1_io();
+    let safety = SafetyConfig::default();
+    let mut c = Controller::new("dog", io.clone(), 0.25, safety.clone()).unwrap();
+    let mut policy = Fixed {
+        action: 0.4,
+        calls: 0,
+    };
+    // No state yet: limp commands, no inference.
+    let out = c.tick(0.0, None, &mut policy);
+    assert_eq!(out.command.mode, ControlMode::ZeroTorque);
+    assert!(
+        out.command
+            .kp
+            .iter()
+            .chain(&out.command.kd)
+            .all(|g| *g == 0.0)
+    );
+
+    let mut lying = standing(&io);
+    lying.joint_pos = io
+        .soft_joint_limits
+        .iter()
+        .map(|l| 0.8 * l[1] + 0.2 * l[0])
+        .collect();
+    let mut t = 0.0;
+    let mut modes = Vec::new();
+    let mut first_ramp_target = None;
+    let mut last_ramp_target = None;
+    while t < 3.0 {
+        t += DT;
+        let latest = Latest {
+            state: &lying,
+            received_at: t - 0.005,
+        };
+        let out = c.tick(t, Some(latest), &mut policy);
+        if out.command.mode == ControlMode::Ramp {
+            first_ramp_target.get_or_insert(out.command.joint_pos_target.clone());
+            last_ramp_target = Some(out.command.joint_pos_target.clone());
+            assert_eq!(out.command.kp, io.kp);
+        }
+        if modes.last() != Some(&out.command.mode) {
+            modes.push(out.command.mode);
+        }
+    }
+    assert_eq!(
+        modes,
+        [
+            ControlMode::ZeroTorque,
+            ControlMode::Ramp,
+            ControlMode::Policy
+        ]
+    );
+    // The ramp starts at the measured pose and ends at the default pose.
+    let first = first_ramp_target.unwrap();
+    let last = last_ramp_target.unwrap();
+    for j in 0..12 {
+        assert!((first[j] - lying.joint_pos[j]).abs() < 0.05, "joint {j}");
+        assert!(
+            (last[j] - io.default_joint_pos[j]).abs() < 0.05,
+            "joint {j}"
+        );
+    }
+    assert!(policy.calls > 0);
+}
+
+/// A controller already in policy mode at `t`.
+fn in_policy(io: &RobotIo, policy: &mut Fixed) -> (Controller, f64) {
+    let mut c = Controller::new("dog", io.clone(), 0.25, SafetyConfig::default()).unwrap();
+    let state = standing(io);
+    let mut t = 0.0;
+    while c.mode() != ControlMode::Policy {
+        t += DT;
+        c.tick(
+            t,
+            Some(Latest {
+                state: &state,
+                received_at: t,
+            }),
+            policy,
+        );
+        assert!(t < 10.0, "never reached policy mode");
+    }
+    (c, t)
+}
+
+#[test]
+fn policy_targets_are_scaled_and_clipped_to_soft_limits() {
+    let io = a1_io();
+    let mut policy = Fixed {
+        action: 0.4,
+        calls: 0,
+    };
+    let (mut c, t) = in_policy(&io, &mut policy);
+    let state = standing(&io);
+    let out = c.tick(
+        t + DT,
+        Some(Latest {
+            state: &state,
+            received_at: t + DT,
+        }),
+        &mut policy,
+    );
+    assert_eq!(out.command.mode, ControlMode::Policy);
+    for j in 0..12 {
+        let want = (io.default_joint_pos[j] + 0.25 * 0.4)
+            .clamp(io.soft_joint_limits[j][0], io.soft_joint_limits[j][1]);
+        assert!((out.command.joint_pos_target[j] - want).abs() < 1e-6);
+    }
+    // The last action is fed back into the next observation.
+    let obs = c.last_observation();
+    assert!(obs[36..48].iter().all(|a| (*a - 0.4).abs() < 1e-6));
+    // A huge action is clipped to ±action_clip, then to the soft limits.
+    policy.action = 1e9;
+    let out = c.tick(
+        t + 2.0 * DT,
+        Some(Latest {
+            state: &state,
+            received_at: t + 2.0 * DT,
+        }),
+        &mut policy,
+    );
+    assert_eq!(out.command.mode, ControlMode::Policy);
+    for j in 0..12 {
+        let [lo, hi] = io.soft_joint_limits[j];
+        let q = out.command.joint_pos_target[j];
+        assert!(q >= lo && q <= hi, "joint {j}: {q} outside [{lo}, {hi}]");
+    }
+}
+
+#[test]
+fn stale_state_damps_within_three_periods_and_stays_damped() {
+    let io = a1_io();
+    let mut policy = Fixed {
+        action: 0.0,
+        calls: 0,
+    };
+    let (mut c, t0) = in_policy(&io, &mut policy);
+    let state = standing(&io);
+    let last_state_at = t0;
+    let mut policy_ticks_after = 0;
+    let mut t = t0;
+    let damped_at = loop {
+        t += DT;
+        let out = c.tick(
+            t,
+            Some(Latest {
+                state: &state,
+                received_at: last_state_at,
+            }),
+            &mut policy,
+        );
+        match out.command.mode {
+            ControlMode::Policy => policy_ticks_after += 1,
+            ControlMode::Damping => {
+                assert!(matches!(out.new_fault, Some(Fault::StaleState { .. })));
+                assert!(out.command.kp.iter().all(|k| *k == 0.0));
+                assert!(out.command.kd.iter().all(|k| *k > 0.0));
+                break t;
+            }
+            m => panic!("unexpected mode {m:?}"),
+        }
+    };
+    assert!(
+        policy_ticks_after <= 3,
+        "{policy_ticks_after} policy ticks on a stale state"
+    );
+    assert!(damped_at - last_state_at <= 4.0 * DT + 1e-9);
+    // Fresh states again: still damping (latched) until the operator resumes.
+    for k in 1..20 {
+        let now = damped_at + k as f64 * DT;
+        let out = c.tick(
+            now,
+            Some(Latest {
+                state: &state,
+                received_at: now,
+            }),
+            &mut policy,
+        );
+        assert_eq!(out.command.mode, ControlMode::Damping);
+    }
+    let now = damped_at + 20.0 * DT;
+    let fresh = Latest {
+        state: &state,
+        received_at: now,
+    };
+    c.operator(OperatorAction::Resume, now, Some(fresh))
+        .unwrap();
+    assert_eq!(c.mode(), ControlMode::Ramp);
+    assert!(c.fault().is_none());
+}
+
+#[test]
+fn resume_is_refused_while_the_cause_persists() {
+    let io = a1_io();
+    let mut policy = Fixed {
+        action: 0.0,
+        calls: 0,
+    };
+    let (mut c, t) = in_policy(&io, &mut policy);
+    let state = standing(&io);
+    c.operator(OperatorAction::Damp, t, None).unwrap();
+    assert_eq!(c.mode(), ControlMode::Damping);
+    assert_eq!(c.fault(), Some(&Fault::Operator));
+    // Stale: refused.
+    let old = Latest {
+        state: &state,
+        received_at: t - 1.0,
+    };
+    assert!(c.operator(OperatorAction::Resume, t, Some(old)).is_err());
+    // Tilted 90°: refused.
+    let mut fallen = state.clone();
+    let s = std::f32::consts::FRAC_1_SQRT_2;
+    fallen.base_quat = [s, s, 0.0, 0.0];
+    let tilted = Latest {
+        state: &fallen,
+        received_at: t,
+    };
+    assert!(c.operator(OperatorAction::Resume, t, Some(tilted)).is_err());
+    assert_eq!(c.mode(), ControlMode::Damping);
+}
+
+#[test]
+fn non_finite_action_and_tilt_damp() {
+    let io = a1_io();
+    let mut policy = Fixed {
+        action: 0.0,
+        calls: 0,
+    };
+    let (mut c, t) = in_policy(&io, &mut policy);
+    let state = standing(&io);
+    policy.action = f32::NAN;
+    let out = c.tick(
+        t + DT,
+        Some(Latest {
+            state: &state,
+            received_at: t + DT,
+        }),
+        &mut policy,
+    );
+    assert_eq!(out.command.mode, ControlMode::Damping);
+    assert_eq!(out.new_fault, Some(Fault::NonFiniteAction));
+    assert!(out.command.joint_pos_target.iter().all(|q| q.is_finite()));
+
+    policy.action = f32::INFINITY;
+    let (mut c, t) = in_policy(
+        &io,
+        &mut Fixed {
+            action: 0.0,
+            calls: 0,
+        },
+    );
+    let out = c.tick(
+        t + DT,
+        Some(Latest {
+            state: &state,
+            received_at: t + DT,
+        }),
+        &mut policy,
+    );
+    assert_eq!(out.new_fault, Some(Fault::NonFiniteAction));
+
+    let (mut c, t) = in_policy(
+        &io,
+        &mut Fixed {
+            action: 0.0,
+            calls: 0,
+        },
+    );
+    let mut tilted = state.clone();
+    let a: f32 = 70f32.to_radians() / 2.0;
+    tilted.base_quat = [a.cos(), a.sin(), 0.0, 0.0];
+    let out = c.tick(
+        t + DT,
+        Some(Latest {
+            state: &tilted,
+            received_at: t + DT,
+        }),
+        &mut policy,
+    );
+    assert!(matches!(out.new_fault, Some(Fault::Tilt { degrees }) if (degrees - 70.0).abs() < 0.5));
+}
+
+#[test]
+fn bad_safety_settings_are_errors() {
+    let mut s = SafetyConfig::default();
+    s.stale_periods = 0.0;
+    let e = Controller::new("dog", a1_io(), 0.25, s).unwrap_err();
+    assert!(e.to_string().contains("stale_periods"), "{e}");
+}
+
+fn export_for(robot: &str) -> Vec<u8> {
+    use l3p_policy::{PolicyConfig, PolicyModel, RobotSpec as PolicyRobot};
+    let r = RobotSpec::by_name(robot).unwrap();
+    let mut cfg = PolicyConfig::default();
+    cfg.encoder_hidden = vec![16];
+    cfg.core_hidden = vec![16];
+    cfg.decoder_hidden = vec![16];
+    cfg.critic_hidden = vec![16];
+    let spec = PolicyRobot {
+        name: robot.into(),
+        obs_dim: 48,
+        action_dim: 12,
+        action_scale: r.action_scale,
+        io: Some(robot_io(r, &flat_env()).unwrap()),
+    };
+    let model = PolicyModel::new(cfg, vec![spec], &l3p_policy::cpu_device()).unwrap();
+    l3p_policy::export_bytes(&model, robot).unwrap().0
+}
+
+#[test]
+fn artifacts_for_another_robot_or_with_a_bad_hash_are_refused() {
+    let go1 = export_for("go1");
+    let e = load_policy("x@1", &go1, None, a1()).unwrap_err();
+    assert!(e.to_string().contains("policy for go1"), "{e}");
+    let e = load_policy("x@1", &go1, Some("00"), RobotSpec::by_name("go1").unwrap()).unwrap_err();
+    assert!(e.to_string().contains("sha256"), "{e}");
+    let ok = load_policy("x@1", &go1, None, RobotSpec::by_name("go1").unwrap()).unwrap();
+    assert!(!ok.io_from_catalog);
+    assert_eq!(ok.io.joint_names.len(), 12);
+    let e = load_policy("x@1", b"not a policy", None, a1()).unwrap_err();
+    assert!(e.to_string().contains("safetensors"), "{e}");
+}
