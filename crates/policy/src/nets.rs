@@ -1,11 +1,17 @@
 //! Building blocks: [`Mlp`] (fully connected, ELU between layers, linear output) with its
 //! [`MlpConfig`], and [`elu`], written without masks because burn's `activation::elu` (built on
 //! `mask_where`) is several times slower on the `flex` CPU backend (`reference/burn-cpu-notes.md`).
+//! Hidden layers of an [`Mlp`] use [`bias_elu`] (one fused, multi-threaded op, see [`kernels`]).
 
+pub mod kernels;
+
+use burn::backend::Dispatch;
 use burn::module::Module;
 use burn::nn::{Linear, LinearConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor};
+
+use kernels::BiasEluBackend;
 
 /// ELU with α = 1: `relu(x) + exp(-relu(-x)) - 1` — the same values and gradients as
 /// `x > 0 ? x : exp(x) - 1`, with only elementwise ops.
@@ -16,6 +22,18 @@ pub fn elu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
     let pos = relu(x.clone());
     let neg = relu(x.neg()).neg().exp();
     pos.add(neg).sub_scalar(1.0)
+}
+
+/// `elu(z + b)` as one op (forward and backward fused, rows split over the rayon pool); the same
+/// values and gradients as `elu(z + b.unsqueeze())`.
+///
+/// # Shapes
+/// `z [m, n]`, `b [n]` → `[m, n]`
+pub fn bias_elu(z: Tensor<2>, b: Tensor<1>) -> Tensor<2> {
+    Tensor::from_dispatch(<Dispatch as BiasEluBackend>::bias_elu(
+        z.into_dispatch(),
+        b.into_dispatch(),
+    ))
 }
 
 /// Sizes of an [`Mlp`]: `input → hidden… → output`.
@@ -67,10 +85,11 @@ impl Mlp {
         let last = self.layers.len().saturating_sub(1);
         let mut x = x;
         for (i, layer) in self.layers.iter().enumerate() {
-            x = layer.forward(x);
-            if i < last {
-                x = elu(x);
-            }
+            x = match (&layer.bias, i < last) {
+                (Some(b), true) => bias_elu(x.matmul(layer.weight.val()), b.val()),
+                (None, true) => elu(layer.forward(x)),
+                (_, false) => layer.forward(x),
+            };
         }
         x
     }
