@@ -7,48 +7,15 @@
 //! the `l3p` binary is.)
 
 use std::path::Path;
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+mod common;
+
+use common::{Procs, log_tails};
 use l3p_proto::{MetricsRecord, RolloutChunk, codec, keys};
 use l3p_registry::net::{ZenohSettings, free_loopback_port, open_session};
 
 const RUN: &str = "e2e";
-
-/// Kills its processes when dropped, so a failing test leaves nothing behind.
-struct Procs(Vec<(String, Child)>);
-
-impl Procs {
-    fn spawn(&mut self, name: &str, args: &[&str], log_dir: &Path) {
-        let log = std::fs::File::create(log_dir.join(format!("{name}.log"))).unwrap();
-        let child = Command::new(env!("CARGO_BIN_EXE_l3p"))
-            .args(args)
-            .env("RUST_LOG", "info")
-            .stdin(Stdio::null())
-            .stdout(log.try_clone().unwrap())
-            .stderr(log)
-            .spawn()
-            .unwrap();
-        self.0.push((name.to_string(), child));
-    }
-
-    fn kill(&mut self, name: &str) {
-        if let Some(pos) = self.0.iter().position(|(n, _)| n == name) {
-            let (_, mut child) = self.0.remove(pos);
-            child.kill().unwrap();
-            child.wait().unwrap();
-        }
-    }
-}
-
-impl Drop for Procs {
-    fn drop(&mut self) {
-        for (_, child) in &mut self.0 {
-            let _ = child.kill();
-            let _ = child.wait();
-        }
-    }
-}
 
 fn write_config(dir: &Path) -> std::path::PathBuf {
     let path = dir.join("e2e.toml");
@@ -101,24 +68,6 @@ struct Watcher {
     rx: tokio::sync::mpsc::UnboundedReceiver<MetricsRecord>,
     seen: Vec<MetricsRecord>,
     log_dir: std::path::PathBuf,
-}
-
-/// The last lines of every process log, for failure messages.
-fn log_tails(dir: &Path) -> String {
-    let mut out = String::new();
-    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
-        let path = entry.path();
-        if path.extension().is_some_and(|e| e == "log") {
-            let text = std::fs::read_to_string(&path).unwrap_or_default();
-            let lines: Vec<&str> = text.lines().collect();
-            out.push_str(&format!(
-                "\n--- {} ---\n{}",
-                path.display(),
-                lines[lines.len().saturating_sub(15)..].join("\n")
-            ));
-        }
-    }
-    out
 }
 
 impl Watcher {

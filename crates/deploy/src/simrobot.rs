@@ -60,6 +60,8 @@ pub struct SimRobotSummary {
     /// Lowest base height (m) and largest tilt (degrees) while under policy commands.
     pub policy_min_base_height: f32,
     pub policy_max_tilt_deg: f32,
+    /// Mean base height (m) while under policy commands.
+    pub policy_mean_base_height: f32,
     /// Base displacement (world x, y) while under policy commands, and mean forward speed.
     pub policy_displacement: [f32; 2],
     pub policy_mean_forward_velocity: f32,
@@ -176,6 +178,7 @@ pub async fn run_sim_robot(
         let mut policy_start: Option<[f32; 3]> = None;
         let mut seq = 0u64;
         let mut step = 0u64;
+        let mut height_sum = 0.0f64;
         let timeout = Duration::from_secs_f32(opts.command_timeout_s);
         while !cancel.is_cancelled() && opts.duration.is_none_or(|d| start.elapsed() < d) {
             let (now, _) = pacer.wait();
@@ -224,6 +227,7 @@ pub async fn run_sim_robot(
             if mode == ControlMode::Policy {
                 let start_pos = *policy_start.get_or_insert(state.base_pos);
                 summary.policy_seconds += cfg.dt as f64;
+                height_sum += state.base_pos[2] as f64;
                 summary.policy_min_base_height =
                     summary.policy_min_base_height.min(state.base_pos[2]);
                 let g = projected_gravity(state.base_quat);
@@ -265,6 +269,8 @@ pub async fn run_sim_robot(
         if summary.policy_seconds > 0.0 {
             summary.policy_mean_forward_velocity =
                 summary.policy_displacement[0] / summary.policy_seconds as f32;
+            summary.policy_mean_base_height =
+                (height_sum / summary.steps_policy.max(1) as f64) as f32;
         } else {
             summary.policy_min_base_height = 0.0;
         }

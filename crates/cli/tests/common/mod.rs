@@ -1,0 +1,90 @@
+//! Process helpers shared by the process-level tests.
+#![allow(dead_code)]
+
+use std::path::Path;
+use std::process::{Child, Command, Stdio};
+
+/// Kills its processes when dropped, so a failing test leaves nothing behind.
+pub struct Procs(pub Vec<(String, Child)>);
+
+impl Procs {
+    /// `l3p <args>` with stdout and stderr in `<log_dir>/<name>.log`.
+    pub fn spawn(&mut self, name: &str, args: &[&str], log_dir: &Path) {
+        let log = std::fs::File::create(log_dir.join(format!("{name}.log"))).unwrap();
+        self.start(name, args, log.try_clone().unwrap(), log);
+    }
+
+    /// `l3p <args>` with stdout in `<log_dir>/<name>.out` and stderr in `<name>.log`.
+    pub fn spawn_split(&mut self, name: &str, args: &[&str], log_dir: &Path) {
+        let out = std::fs::File::create(log_dir.join(format!("{name}.out"))).unwrap();
+        let log = std::fs::File::create(log_dir.join(format!("{name}.log"))).unwrap();
+        self.start(name, args, out, log);
+    }
+
+    fn start(&mut self, name: &str, args: &[&str], out: std::fs::File, log: std::fs::File) {
+        let child = Command::new(env!("CARGO_BIN_EXE_l3p"))
+            .args(args)
+            .env("RUST_LOG", "info")
+            .stdin(Stdio::null())
+            .stdout(out)
+            .stderr(log)
+            .spawn()
+            .unwrap();
+        self.0.push((name.to_string(), child));
+    }
+
+    /// Waits up to `timeout` for `name` to exit on its own; `None` if it is still running.
+    pub fn wait_exit(
+        &mut self,
+        name: &str,
+        timeout: std::time::Duration,
+    ) -> Option<std::process::ExitStatus> {
+        let deadline = std::time::Instant::now() + timeout;
+        let pos = self.0.iter().position(|(n, _)| n == name)?;
+        loop {
+            if let Ok(Some(status)) = self.0[pos].1.try_wait() {
+                self.0.remove(pos);
+                return Some(status);
+            }
+            if std::time::Instant::now() > deadline {
+                return None;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(50));
+        }
+    }
+
+    pub fn kill(&mut self, name: &str) {
+        if let Some(pos) = self.0.iter().position(|(n, _)| n == name) {
+            let (_, mut child) = self.0.remove(pos);
+            child.kill().unwrap();
+            child.wait().unwrap();
+        }
+    }
+}
+
+impl Drop for Procs {
+    fn drop(&mut self) {
+        for (_, child) in &mut self.0 {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// The last lines of every process log, for failure messages.
+pub fn log_tails(dir: &Path) -> String {
+    let mut out = String::new();
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let path = entry.path();
+        if path.extension().is_some_and(|e| e == "log") {
+            let text = std::fs::read_to_string(&path).unwrap_or_default();
+            let lines: Vec<&str> = text.lines().collect();
+            out.push_str(&format!(
+                "\n--- {} ---\n{}",
+                path.display(),
+                lines[lines.len().saturating_sub(15)..].join("\n")
+            ));
+        }
+    }
+    out
+}
