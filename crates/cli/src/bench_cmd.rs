@@ -21,6 +21,26 @@ pub enum BenchCommand {
     /// Learner throughput: one full PPO update (5 epochs × 4 minibatches) on synthetic data, and
     /// policy inference for a batch of `envs` observations.
     Learner(LearnerBenchArgs),
+    /// Deploy loop at 50 Hz: tick-period error and inference latency of `l3p deploy` driving an
+    /// in-process `sim-robot` over loopback Zenoh, against a bare deadline loop (no work) as the
+    /// baseline measured in the same run.
+    Deploy(DeployBenchArgs),
+}
+
+/// `l3p bench deploy` arguments.
+#[derive(Debug, Args)]
+pub struct DeployBenchArgs {
+    /// Export file or directory (e.g. docs/a1-flat-session1/policy).
+    #[arg(long)]
+    pub policy: std::path::PathBuf,
+    #[arg(long, default_value = "a1")]
+    pub robot: String,
+    /// Seconds of each measurement (baseline, then deploy).
+    #[arg(long, default_value_t = 20.0)]
+    pub seconds: f64,
+    /// Forward command given to the sim-robot (m/s).
+    #[arg(long, default_value_t = 0.5)]
+    pub vx: f32,
 }
 
 /// `l3p bench learner` arguments.
@@ -93,6 +113,7 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
     match args.command {
         BenchCommand::Sim(a) => sim(a),
         BenchCommand::Learner(a) => learner(a),
+        BenchCommand::Deploy(a) => deploy(a),
     }
 }
 
@@ -120,6 +141,97 @@ fn learner(a: LearnerBenchArgs) -> anyhow::Result<()> {
     println!(
         "  inference, batch {}: burn {:.0} obs/s, pure-Rust export {:.0} obs/s",
         a.envs, r.infer_burn_obs_per_second, r.infer_rust_obs_per_second
+    );
+    Ok(())
+}
+
+fn deploy(a: DeployBenchArgs) -> anyhow::Result<()> {
+    use l3p_deploy::pacer::Pacer;
+    use l3p_deploy::stats::Percentiles;
+    use l3p_registry::net::{ZenohSettings, free_loopback_port, open_session};
+    use std::time::{Duration, Instant};
+
+    let robot = RobotSpec::by_name(&a.robot)?;
+    let loaded = l3p_deploy::read_policy_file(&a.policy, robot)?;
+    let period = Duration::from_secs_f32(loaded.io.control_dt);
+    let seconds = Duration::from_secs_f64(a.seconds);
+
+    // Baseline: the same deadline loop doing nothing.
+    let mut pacer = Pacer::new(period);
+    let mut base = Percentiles::new(usize::MAX / 2);
+    let start = Instant::now();
+    while start.elapsed() < seconds {
+        if let (_, Some(dt)) = pacer.wait() {
+            base.push((dt.as_secs_f64() - period.as_secs_f64()).abs() as f32 * 1e6);
+        }
+    }
+    let (b50, b99) = base.p50_p99();
+
+    let rt = crate::runtime::tokio_runtime()?;
+    let status = rt.block_on(async {
+        let port = free_loopback_port()?;
+        let robot_session = open_session(&ZenohSettings::loopback(Some(port), &[])).await?;
+        let deploy_session = open_session(&ZenohSettings::loopback(None, &[port])).await?;
+        let cancel = tokio_util::sync::CancellationToken::new();
+        let sim = tokio::spawn({
+            let cancel = cancel.clone();
+            async move {
+                let opts = l3p_deploy::SimRobotOptions {
+                    robot,
+                    robot_id: "bench".into(),
+                    state_hz: 200,
+                    command: [a.vx, 0.0, 0.0],
+                    duration: None,
+                    command_timeout_s: 0.1,
+                };
+                l3p_deploy::run_sim_robot(&robot_session, opts, cancel).await
+            }
+        });
+        let opts = l3p_deploy::DeployOptions {
+            robot,
+            robot_id: "bench".into(),
+            safety: l3p_deploy::SafetyConfig::default(),
+            duration: Some(seconds),
+            status_every: Duration::from_secs(1),
+        };
+        let status = l3p_deploy::run_deploy(
+            &deploy_session,
+            loaded,
+            opts,
+            tokio_util::sync::CancellationToken::new(),
+        )
+        .await?;
+        cancel.cancel();
+        let summary = sim.await??;
+        anyhow::Ok((status, summary))
+    })?;
+    let (status, summary) = status;
+    println!(
+        "bench deploy: robot {} policy {} {} Hz, {:.0} s each",
+        robot.name,
+        a.policy.display(),
+        1.0 / period.as_secs_f64(),
+        a.seconds
+    );
+    println!("  baseline deadline loop (no work): period error p50 {b50:.1} us, p99 {b99:.1} us");
+    println!(
+        "  deploy loop: period error p50 {:.1} us, p99 {:.1} us ({:.2}x / {:.2}x baseline); overruns {}",
+        status.period_error_p50_us,
+        status.period_error_p99_us,
+        status.period_error_p50_us / b50.max(1.0),
+        status.period_error_p99_us / b99.max(1.0),
+        status.overruns
+    );
+    println!(
+        "  inference (observation -> action, 1 obs): p50 {:.1} us, p99 {:.1} us",
+        status.inference_p50_us, status.inference_p99_us
+    );
+    println!(
+        "  sim-robot: {:.1} s under the policy, {:.2} m/s forward, min base height {:.2} m, max tilt {:.0} deg",
+        summary.policy_seconds,
+        summary.policy_mean_forward_velocity,
+        summary.policy_min_base_height,
+        summary.policy_max_tilt_deg
     );
     Ok(())
 }
