@@ -69,3 +69,23 @@ fn bad_config_is_a_clear_error_not_a_panic() {
         "{err}"
     );
 }
+
+#[test]
+fn closed_stdout_is_not_a_panic() {
+    // The reader goes away before `l3p` prints (`l3p robots list | head -0`).
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_l3p"))
+        .args(["robots", "list"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(
+        matches!(out.status.code(), Some(0 | 141)),
+        "{:?}",
+        out.status
+    );
+}

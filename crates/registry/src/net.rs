@@ -36,13 +36,12 @@ impl Default for ZenohSettings {
 }
 
 impl ZenohSettings {
-    /// Loopback-only peer: listens on `listen` (if any), connects to `connect`, no scouting.
+    /// Loopback-only peer: listens on 127.0.0.1 (port `listen`, or any free one — never Zenoh's
+    /// default of every interface), connects to `connect`, no scouting.
     pub fn loopback(listen: Option<u16>, connect: &[u16]) -> Self {
         Self {
             mode: "peer".into(),
-            listen: listen
-                .map(|p| vec![format!("tcp/127.0.0.1:{p}")])
-                .unwrap_or_default(),
+            listen: vec![format!("tcp/127.0.0.1:{}", listen.unwrap_or(0))],
             connect: connect
                 .iter()
                 .map(|p| format!("tcp/127.0.0.1:{p}"))
@@ -104,4 +103,26 @@ pub async fn open_session(settings: &ZenohSettings) -> Result<zenoh::Session, Ne
 pub fn free_loopback_port() -> std::io::Result<u16> {
     let listener = std::net::TcpListener::bind("127.0.0.1:0")?;
     Ok(listener.local_addr()?.port())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn loopback_sessions_never_listen_beyond_loopback() {
+        assert_eq!(
+            ZenohSettings::loopback(None, &[7447]).listen,
+            ["tcp/127.0.0.1:0"]
+        );
+        assert_eq!(
+            ZenohSettings::loopback(Some(9000), &[]).listen,
+            ["tcp/127.0.0.1:9000"]
+        );
+        let config = ZenohSettings::loopback(None, &[7447])
+            .to_zenoh_config()
+            .unwrap();
+        let listen = config.get_json("listen/endpoints").unwrap();
+        assert!(listen.contains("127.0.0.1:0"), "{listen}");
+    }
 }
