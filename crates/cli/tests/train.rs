@@ -36,6 +36,7 @@ eval_samples = 32
 max_policy_lag = 1
 max_iterations = 5
 checkpoint_every = 2
+registry_checkpoint_every = 4
 [rollout]
 steps_per_env = 8
 [[actors]]
@@ -68,6 +69,24 @@ envs = 4
         .count();
     assert_eq!(learner_lines, 5, "{metrics}");
     assert!(data.join("local/checkpoints/latest.ckpt").exists());
+    // Local checkpoints at 2, 4 and 5 (shutdown); the registry keeps 4 and the final 5.
+    let out = l3p(&[
+        "registry",
+        "list",
+        "--name",
+        "local-checkpoint",
+        "--json",
+        "--data",
+        data_arg,
+    ]);
+    let listed: serde_json::Value = serde_json::from_slice(&out.stdout)
+        .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stdout)));
+    let text = listed.to_string();
+    assert!(
+        text.contains("\"iteration\":4.0") && text.contains("\"iteration\":5.0"),
+        "{text}"
+    );
+    assert!(!text.contains("\"iteration\":2.0"), "{text}");
 
     let out = l3p(&[
         "eval",

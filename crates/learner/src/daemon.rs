@@ -43,6 +43,10 @@ pub struct DaemonConfig {
     pub min_actors: usize,
     /// Write a checkpoint every this many iterations (and always on shutdown).
     pub checkpoint_every: u64,
+    /// Of those, store one in the registry (with the `<run>-<robot>` deploy artifacts) every this
+    /// many iterations, and always on shutdown: registry versions are permanent and a checkpoint is
+    /// ~5 MB, so the registry keeps a sparser history than the local `latest.ckpt`.
+    pub registry_checkpoint_every: u64,
     /// Stop after this many iterations (0: run until stopped).
     pub max_iterations: u64,
     /// Checkpoint to initialise from in the transfer modes.
@@ -56,6 +60,7 @@ impl Default for DaemonConfig {
             gather_timeout_s: 120.0,
             min_actors: 1,
             checkpoint_every: 25,
+            registry_checkpoint_every: 100,
             max_iterations: 1500,
             init_from: None,
         }
@@ -524,6 +529,7 @@ pub async fn run(
     let mut gather_start = Instant::now();
     let mut weights_seconds = 0f64;
     let mut last_checkpoint = ppo.iteration();
+    let mut last_registry_checkpoint = ppo.iteration();
     let max_iterations = opts.daemon.max_iterations;
     let mut tick = tokio::time::interval(Duration::from_millis(500));
     let incarnation = unix_ms();
@@ -648,8 +654,15 @@ pub async fn run(
         weights_seconds = 0.0;
         emit_metrics(&session, &metrics_file, &record).await?;
         if new_version - last_checkpoint >= opts.daemon.checkpoint_every.max(1) {
-            save_checkpoint(&ppo, &opts, registry.as_ref(), &record).await?;
+            let to_registry = registry.is_some()
+                && new_version - last_registry_checkpoint
+                    >= opts.daemon.registry_checkpoint_every.max(1);
+            let target = registry.as_ref().filter(|_| to_registry);
+            save_checkpoint(&ppo, &opts, target, &record).await?;
             last_checkpoint = new_version;
+            if to_registry {
+                last_registry_checkpoint = new_version;
+            }
         }
         if let Some(progress) = &progress {
             let _ = progress.send(IterationReport {
@@ -662,7 +675,10 @@ pub async fn run(
     };
 
     // Final checkpoint, whatever stopped us.
-    if ppo.iteration() != last_checkpoint || !checkpoint_path(&opts.run_dir).exists() {
+    if ppo.iteration() != last_checkpoint
+        || !checkpoint_path(&opts.run_dir).exists()
+        || (registry.is_some() && ppo.iteration() != last_registry_checkpoint)
+    {
         let record = MetricsRecord::new(&run, "learner", ppo.iteration(), unix_ms());
         save_checkpoint(&ppo, &opts, registry.as_ref(), &record).await?;
         info!(iteration = ppo.iteration(), "final checkpoint written");
