@@ -36,6 +36,9 @@ pub struct SafetyConfig {
     pub damping_kd_scale: f32,
     /// On stop (operator `Stop`, SIGTERM, Ctrl-C) keep sending damping this long before exiting.
     pub stop_damping_s: f32,
+    /// Stay limp after start-up until an operator `Resume` (for physical robots: a controller
+    /// restarted by its service manager must not stand the robot up unattended).
+    pub wait_for_operator: bool,
 }
 
 impl Default for SafetyConfig {
@@ -47,6 +50,7 @@ impl Default for SafetyConfig {
             ramp_s: 2.0,
             damping_kd_scale: 1.0,
             stop_damping_s: 1.0,
+            wait_for_operator: false,
         }
     }
 }
@@ -172,6 +176,8 @@ pub struct Controller {
     /// When the current mode began (ZeroTorque: when the first fresh state arrived).
     mode_since: Option<f64>,
     ramp_from: Vec<f32>,
+    /// Start-up may leave zero-torque (always, unless `wait_for_operator`).
+    armed: bool,
     last_action: Vec<f32>,
     last_target: Vec<f32>,
     obs: Vec<f32>,
@@ -199,6 +205,7 @@ impl Controller {
             fault: None,
             mode_since: None,
             ramp_from: io.default_joint_pos.clone(),
+            armed: !safety.wait_for_operator,
             last_action: vec![0.0; n],
             last_target: io.default_joint_pos.clone(),
             action: vec![0.0; n],
@@ -258,6 +265,13 @@ impl Controller {
                 }
                 Ok(())
             }
+            OperatorAction::Resume if self.mode == ControlMode::ZeroTorque && !self.armed => {
+                if latest.is_none() || self.is_stale(now, latest).is_some() {
+                    return Err("cannot start: no fresh robot state".into());
+                }
+                self.armed = true;
+                Ok(())
+            }
             OperatorAction::Resume => {
                 if self.mode != ControlMode::Damping {
                     return Err(format!("not in damping (mode {:?})", self.mode));
@@ -315,7 +329,9 @@ impl Controller {
         match self.mode {
             ControlMode::ZeroTorque => match (self.mode_since, latest) {
                 (None, Some(_)) => self.mode_since = Some(now),
-                (Some(since), Some(l)) if now - since >= self.safety.zero_torque_s as f64 => {
+                (Some(since), Some(l))
+                    if self.armed && now - since >= self.safety.zero_torque_s as f64 =>
+                {
                     self.start_ramp(l.state, now);
                 }
                 _ => {}

@@ -450,3 +450,49 @@ fn artifacts_for_another_robot_or_with_a_bad_hash_are_refused() {
     let e = load_policy("x@1", b"not a policy", None, a1()).unwrap_err();
     assert!(e.to_string().contains("safetensors"), "{e}");
 }
+
+#[test]
+fn wait_for_operator_keeps_the_robot_limp_until_resume() {
+    let io = a1_io();
+    let safety = SafetyConfig {
+        wait_for_operator: true,
+        ..SafetyConfig::default()
+    };
+    let mut c = Controller::new("dog", io.clone(), 0.25, safety).unwrap();
+    let mut policy = Fixed {
+        action: 0.0,
+        calls: 0,
+    };
+    let state = standing(&io);
+    let mut t = 0.0;
+    for _ in 0..200 {
+        t += DT;
+        let fresh = Latest {
+            state: &state,
+            received_at: t,
+        };
+        assert_eq!(
+            c.tick(t, Some(fresh), &mut policy).command.mode,
+            ControlMode::ZeroTorque
+        );
+    }
+    let fresh = Latest {
+        state: &state,
+        received_at: t,
+    };
+    c.operator(OperatorAction::Resume, t, Some(fresh)).unwrap();
+    let mut modes = Vec::new();
+    for _ in 0..200 {
+        t += DT;
+        let fresh = Latest {
+            state: &state,
+            received_at: t,
+        };
+        let m = c.tick(t, Some(fresh), &mut policy).command.mode;
+        if modes.last() != Some(&m) {
+            modes.push(m);
+        }
+    }
+    // Limp for longer than zero_torque_s already: straight into the ramp.
+    assert_eq!(modes, [ControlMode::Ramp, ControlMode::Policy]);
+}
