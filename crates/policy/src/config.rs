@@ -292,7 +292,7 @@ impl RobotIo {
         if self.soft_joint_limits.iter().any(|l| l[0] > l[1]) {
             return Err("io.soft_joint_limits has lo > hi".into());
         }
-        if !(self.control_dt > 0.0) {
+        if self.control_dt <= 0.0 {
             return Err(format!("io.control_dt {} is not > 0", self.control_dt));
         }
         Ok(())
