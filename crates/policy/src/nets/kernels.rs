@@ -163,7 +163,10 @@ fn elu_backward_task(grad: &mut [f32], out: &[f32], db: &mut [f32]) {
 /// In place: `data [m, n] ← elu(data + bias)`.
 pub fn bias_elu_slice(data: &mut [f32], bias: &[f32]) {
     let n = bias.len();
-    assert!(n > 0 && data.len().is_multiple_of(n), "bias_elu: shape mismatch");
+    assert!(
+        n > 0 && data.len().is_multiple_of(n),
+        "bias_elu: shape mismatch"
+    );
     let rows = rows_per_task(data.len() / n, n);
     if rows * n >= data.len() {
         bias_elu_task(data, bias);
