@@ -46,6 +46,10 @@ pub trait RolloutEnv: Send + 'static {
         truncated: &mut [bool],
         episodes: &mut Vec<EpisodeStats>,
     ) -> Result<(), ActorError>;
+    /// Mean base height above the ground under it over the envs (m), where the env knows it.
+    fn mean_base_height(&self) -> Option<f32> {
+        None
+    }
 }
 
 /// The rapier locomotion environment as a [`RolloutEnv`].
@@ -113,6 +117,15 @@ impl RolloutEnv for SimEnv {
             terminated: e.reason != DoneReason::TimeOut,
         }));
         Ok(())
+    }
+    fn mean_base_height(&self) -> Option<f32> {
+        let terrain = self.env.terrain();
+        let n = self.env.num_envs();
+        let sum: f32 = (0..n)
+            .filter_map(|e| self.env.robot_state(e))
+            .map(|s| s.base_pos[2] - terrain.height_at(s.base_pos[0], s.base_pos[1]))
+            .sum();
+        (n > 0).then(|| sum / n as f32)
     }
 }
 
@@ -449,6 +462,9 @@ pub struct EvalSummary {
     pub yaw_rate_error: f32,
     /// Share of episodes that ended by termination (fall, base contact) rather than time-out.
     pub fall_fraction: f32,
+    /// Mean base height above the ground over all envs and steps (m; `None` if the env does not
+    /// report it): a walking policy stays near the robot's standing height, a crawling one does not.
+    pub mean_base_height: Option<f32>,
 }
 
 /// Play `policy` deterministically (action means, no exploration noise) until `episodes` episodes
@@ -470,6 +486,7 @@ pub fn evaluate<E: RolloutEnv>(
     let (mut rewards, mut terminated, mut truncated) =
         (vec![0.0; n], vec![false; n], vec![false; n]);
     let (mut means, mut scratch, mut finished) = (Vec::new(), InferScratch::default(), Vec::new());
+    let (mut height_sum, mut height_steps) = (0.0f64, 0u32);
     for _ in 0..max_steps {
         policy
             .act_into(env.observations(), &mut means, &mut scratch)
@@ -481,6 +498,10 @@ pub fn evaluate<E: RolloutEnv>(
             &mut truncated,
             &mut finished,
         )?;
+        if let Some(h) = env.mean_base_height() {
+            height_sum += h as f64;
+            height_steps += 1;
+        }
         if finished.len() >= episodes {
             break;
         }
@@ -495,5 +516,6 @@ pub fn evaluate<E: RolloutEnv>(
         lin_vel_error: mean(&|e| e.lin_vel_error),
         yaw_rate_error: mean(&|e| e.yaw_rate_error),
         fall_fraction: mean(&|e| if e.terminated { 1.0 } else { 0.0 }),
+        mean_base_height: (height_steps > 0).then(|| (height_sum / height_steps as f64) as f32),
     })
 }

@@ -107,5 +107,12 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         "  falls                       {:.1}%",
         100.0 * s.fall_fraction
     );
+    if let Some(h) = s.mean_base_height {
+        let standing = robot.nominal_standing_height()?;
+        println!(
+            "  base height above ground    {h:.3} m ({:.0}% of the {standing:.3} m standing height)",
+            100.0 * h / standing
+        );
+    }
     Ok(())
 }

@@ -108,6 +108,7 @@ envs = 4
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(stdout.contains("xy-velocity tracking error"), "{stdout}");
+    assert!(stdout.contains("base height above ground"), "{stdout}");
 
     let out = l3p(&["report", "local", "--data-dir", data_arg]);
     let stdout = String::from_utf8_lossy(&out.stdout);
