@@ -83,8 +83,18 @@ pub fn cpu_device() -> Device {
     Device::flex()
 }
 
-/// The CPU training device (`flex` with autodiff).
+/// The training device: `flex` (CPU) with autodiff. Built with a GPU feature the learner trains on
+/// the GPU unless `L3P_DEVICE=cpu`: `wgpu` (Vulkan/Metal/DX12 adapter picked by wgpu, builds
+/// offline) or `cuda` (CUDA device 0; its build script downloads an LLVM bundle). Actors and deploy
+/// always infer on the CPU ([`cpu_device`], exports).
 pub fn train_device() -> Device {
+    #[cfg(any(feature = "cuda", feature = "wgpu"))]
+    if std::env::var("L3P_DEVICE").map_or(true, |v| v != "cpu") {
+        #[cfg(feature = "cuda")]
+        return Device::cuda(0).autodiff();
+        #[cfg(all(feature = "wgpu", not(feature = "cuda")))]
+        return Device::wgpu(burn::tensor::DeviceKind::DefaultDevice).autodiff();
+    }
     Device::flex().autodiff()
 }
 

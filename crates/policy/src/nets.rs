@@ -30,6 +30,10 @@ pub fn elu<const D: usize>(x: Tensor<D>) -> Tensor<D> {
 /// # Shapes
 /// `z [m, n]`, `b [n]` → `[m, n]`
 pub fn bias_elu(z: Tensor<2>, b: Tensor<1>) -> Tensor<2> {
+    // The fused kernels exist for the CPU backend only; GPU devices (`cuda` feature) compose.
+    if z.device().inner() != burn::tensor::Device::flex() {
+        return elu(z.add(b.unsqueeze_dim(0)));
+    }
     Tensor::from_dispatch(<Dispatch as BiasEluBackend>::bias_elu(
         z.into_dispatch(),
         b.into_dispatch(),
