@@ -13,8 +13,7 @@ use l3p_robots::config::{EnvConfig, PROPRIO_OBS};
 use sha2::{Digest, Sha256};
 
 use crate::DeployError;
-use crate::controller::{ExportedPolicy, PolicyFn};
-use crate::io::{ObservationBuilder, robot_io};
+use crate::io::{ObservationBuilder, robot_io, standing_state};
 
 /// A policy checked against its robot, ready to arm.
 #[derive(Debug, Clone)]
@@ -106,22 +105,16 @@ pub fn load_policy(
     // A policy that is already non-finite at the nominal standing pose will be damped at once;
     // say so before arming rather than after.
     let mut obs = vec![0.0; builder.obs_dim()];
-    let standing = l3p_proto::RobotState {
-        wire_version: l3p_proto::WIRE_VERSION,
-        robot_id: "check".into(),
-        seq: 0,
-        stamp_ns: 0,
-        base_quat: [1.0, 0.0, 0.0, 0.0],
-        base_lin_vel: [0.0; 3],
-        base_ang_vel: [0.0; 3],
-        joint_pos: loaded.io.default_joint_pos.clone(),
-        joint_vel: vec![0.0; joints],
-        command: [0.0; 3],
-    };
-    builder.build(&standing, &vec![0.0; joints], &mut obs);
-    let mut action = vec![0.0; joints];
-    ExportedPolicy::new(loaded.policy.clone()).act(&obs, &mut action);
-    if !action.iter().all(|a| a.is_finite()) {
+    builder.build(
+        &standing_state(&loaded.io, "check"),
+        &vec![0.0; joints],
+        &mut obs,
+    );
+    let finite = loaded
+        .policy
+        .act(&obs)
+        .is_ok_and(|a| a.iter().all(|v| v.is_finite()));
+    if !finite {
         tracing::warn!(
             policy = reference,
             "the policy's action at the standing pose is not finite; the watchdog will damp"

@@ -87,6 +87,12 @@ impl SafetyConfig {
     }
 }
 
+/// Angle between the base's z axis and world z (degrees) for base orientation `quat` (w, x, y, z).
+pub fn tilt_degrees(quat: [f32; 4]) -> f32 {
+    let g = projected_gravity(quat);
+    (-g[2]).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
 /// Why the controller went to damping.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Fault {
@@ -246,8 +252,7 @@ impl Controller {
     }
 
     fn tilt_fault(&self, state: &RobotState) -> Option<Fault> {
-        let g = projected_gravity(state.base_quat);
-        let degrees = (-g[2]).clamp(-1.0, 1.0).acos().to_degrees();
+        let degrees = tilt_degrees(state.base_quat);
         (degrees > self.safety.max_tilt_deg).then_some(Fault::Tilt { degrees })
     }
 

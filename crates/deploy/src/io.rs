@@ -90,6 +90,22 @@ pub fn robot_io(robot: &RobotSpec, env: &EnvConfig) -> Result<RobotIo, DeployErr
     })
 }
 
+/// The wire state of `robot_id` standing still and level at the default pose, zero command.
+pub fn standing_state(io: &RobotIo, robot_id: &str) -> RobotState {
+    RobotState {
+        wire_version: l3p_proto::WIRE_VERSION,
+        robot_id: robot_id.into(),
+        seq: 0,
+        stamp_ns: 0,
+        base_quat: [1.0, 0.0, 0.0, 0.0],
+        base_lin_vel: [0.0; 3],
+        base_ang_vel: [0.0; 3],
+        joint_pos: io.default_joint_pos.clone(),
+        joint_vel: vec![0.0; io.joint_names.len()],
+        command: [0.0; 3],
+    }
+}
+
 /// Builds observations from wire states for one policy's layout. Only proprioceptive layouts are
 /// deployable (no terrain sensing on the robot side yet).
 #[derive(Debug, Clone)]

@@ -3,7 +3,8 @@
 //! Main types: [`artifact::LoadedPolicy`] (a deploy artifact checked against its robot:
 //! [`artifact::fetch_policy`], [`artifact::read_policy_file`]), [`controller::Controller`] (the
 //! safety state machine: zero-torque → ramp → policy, watchdog → latched damping),
-//! [`runtime::run_deploy`] (the deadline loop with Zenoh I/O), [`simrobot::run_sim_robot`] (the
+//! [`runtime::run_deploy`] (the deadline loop with Zenoh I/O), [`latest::LatestSlot`] (latest-value
+//! subscriber for robot state and commands), [`simrobot::run_sim_robot`] (the
 //! simulator as a stand-in robot on the same keys), [`io::robot_io`] and
 //! [`io::ObservationBuilder`] (the policy's robot I/O contract and observations built exactly as in
 //! training).
@@ -11,6 +12,7 @@
 pub mod artifact;
 pub mod controller;
 pub mod io;
+pub mod latest;
 pub mod pacer;
 pub mod runtime;
 pub mod simrobot;

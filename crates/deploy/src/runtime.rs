@@ -1,8 +1,7 @@
 //! The deploy daemon ([`run_deploy`]): Zenoh I/O around the [`Controller`] in a 50 Hz deadline loop
 //! on its own OS thread.
 //!
-//! - State in: a subscriber callback decodes and validates each `l3p/robot/<id>/state` message and
-//!   overwrites a latest-value slot (never a queue: an old state is worthless); rejects are counted.
+//! - State in: a [`LatestSlot`] on `l3p/robot/<id>/state` (newest valid state only; rejects counted).
 //! - Commands out: `l3p/robot/<id>/command`, express, `Priority::RealTime`, `CongestionControl::Drop`.
 //! - Operator in: `l3p/robot/<id>/operator` (`l3p operate`), applied at the next tick.
 //! - Status out: JSON [`DeployStatus`] on `l3p/robot/<id>/deploy/status` every second and on every
@@ -10,8 +9,6 @@
 //!
 //! Stopping (cancellation, `--duration`, operator `Stop`) sends damping for `stop_damping_s` first.
 
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use l3p_proto::{
@@ -27,6 +24,7 @@ use zenoh::qos::{CongestionControl, Priority};
 use crate::DeployError;
 use crate::artifact::LoadedPolicy;
 use crate::controller::{Controller, ExportedPolicy, Latest, SafetyConfig};
+use crate::latest::{LatestSlot, now_unix_ns};
 use crate::pacer::Pacer;
 use crate::stats::Percentiles;
 
@@ -45,16 +43,6 @@ pub struct DeployOptions {
 /// Timing samples kept for percentiles: 10 minutes at 50 Hz.
 const STATS_WINDOW: usize = 30_000;
 
-/// The latest valid state and when it arrived.
-type StateSlot = Arc<Mutex<Option<(RobotState, Instant)>>>;
-
-fn now_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos() as u64)
-        .unwrap_or(0)
-}
-
 /// Runs `loaded` as the controller of robot `opts.robot_id` until cancelled, `opts.duration` passes
 /// or an operator sends `Stop`. Returns the final status.
 pub async fn run_deploy(
@@ -72,45 +60,14 @@ pub async fn run_deploy(
         opts.safety.clone(),
     )?;
     let zerr = |e: zenoh::Error| DeployError::Zenoh(e.to_string());
-    let joints = opts.robot.joint_names.len();
 
-    let slot: StateSlot = Arc::new(Mutex::new(None));
-    let rejected = Arc::new(AtomicU64::new(0));
-    let state_sub = {
-        let slot = slot.clone();
-        let rejected = rejected.clone();
-        let robot_id = opts.robot_id.clone();
-        session
-            .declare_subscriber(keys::robot_state(&opts.robot_id))
-            .callback(move |sample| {
-                let received = Instant::now();
-                let state = codec::decode::<RobotState>(&sample.payload().to_bytes())
-                    .map_err(|e| e.to_string())
-                    .and_then(|s| s.validate(joints).map(|()| s).map_err(|e| e.to_string()))
-                    .and_then(|s| {
-                        if s.robot_id == robot_id {
-                            Ok(s)
-                        } else {
-                            Err(format!("state for robot id {:?}", s.robot_id))
-                        }
-                    });
-                match state {
-                    Ok(s) => {
-                        if let Ok(mut latest) = slot.lock() {
-                            *latest = Some((s, received));
-                        }
-                    }
-                    Err(e) => {
-                        let n = rejected.fetch_add(1, Ordering::Relaxed) + 1;
-                        if n.is_power_of_two() {
-                            warn!(rejected = n, "rejected robot state: {e}");
-                        }
-                    }
-                }
-            })
-            .await
-            .map_err(zerr)?
-    };
+    let states = LatestSlot::<RobotState>::subscribe(
+        session,
+        keys::robot_state(&opts.robot_id),
+        &opts.robot_id,
+        opts.robot.joint_names.len(),
+    )
+    .await?;
     let (op_tx, op_rx) = std::sync::mpsc::channel::<OperatorAction>();
     let op_sub = {
         let robot_id = opts.robot_id.clone();
@@ -174,8 +131,7 @@ pub async fn run_deploy(
             loop_state,
             period,
             &opts,
-            &slot,
-            &rejected,
+            &states,
             &op_rx,
             &cancel,
             |bytes| commands.put(bytes).wait().map_err(zerr),
@@ -184,7 +140,6 @@ pub async fn run_deploy(
     })
     .await
     .map_err(|e| DeployError::Config(format!("control loop thread: {e}")))?;
-    drop(state_sub);
     drop(op_sub);
     result
 }
@@ -200,8 +155,7 @@ fn control_loop(
     mut s: LoopState,
     period: Duration,
     opts: &DeployOptions,
-    slot: &StateSlot,
-    rejected: &AtomicU64,
+    states: &LatestSlot<RobotState>,
     operator: &std::sync::mpsc::Receiver<OperatorAction>,
     cancel: &CancellationToken,
     publish_command: impl Fn(Vec<u8>) -> Result<(), DeployError>,
@@ -220,7 +174,7 @@ fn control_loop(
         if let Some(dt) = since {
             period_error.push((dt.as_secs_f64() - period.as_secs_f64()).abs() as f32 * 1e6);
         }
-        let latest_copy = slot.lock().ok().and_then(|l| l.clone());
+        let latest_copy = states.get();
         let latest = latest_copy.as_ref().map(|(state, at)| Latest {
             state,
             received_at: secs(*at),
@@ -255,7 +209,7 @@ fn control_loop(
         if out.inferred {
             inference.push(t0.elapsed().as_secs_f64() as f32 * 1e6);
         }
-        out.command.stamp_ns = now_ns();
+        out.command.stamp_ns = now_unix_ns();
         if let Some(f) = &out.new_fault {
             warn!(
                 "DAMPING: {f} (send `l3p operate --robot-id {} resume` to continue)",
@@ -287,7 +241,7 @@ fn control_loop(
             s.status.mode = mode;
             s.status.fault = s.controller.fault().map(|f| f.to_string());
             s.status.overruns = pacer.overruns;
-            s.status.rejected_states = rejected.load(Ordering::Relaxed);
+            s.status.rejected_states = states.rejected();
             (s.status.period_error_p50_us, s.status.period_error_p99_us) = period_error.p50_p99();
             (s.status.inference_p50_us, s.status.inference_p99_us) = inference.p50_p99();
             if let Ok(json) = codec::encode_json(&s.status)

@@ -7,15 +7,13 @@
 //! robot's low-level controller it owns a second watchdog: no command for `command_timeout_s` →
 //! damping with the robot's training kd. Before the first command the joints are limp.
 
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use l3p_proto::{ControlMode, RobotCommand, RobotState, WIRE_VERSION, codec, keys};
 use l3p_robots::actuator::Actuator;
 use l3p_robots::catalog::{Gains, NUM_JOINTS, RobotSpec};
 use l3p_robots::sim::{RobotBinding, SimConfig, SimWorld};
-use l3p_robots::task::{RobotState as SimState, projected_gravity};
+use l3p_robots::task::RobotState as SimState;
 use rapier3d::math::{Pose, Vec3};
 use serde::{Deserialize, Serialize};
 use tokio_util::sync::CancellationToken;
@@ -24,6 +22,8 @@ use zenoh::Wait;
 use zenoh::qos::{CongestionControl, Priority};
 
 use crate::DeployError;
+use crate::controller::tilt_degrees;
+use crate::latest::{LatestSlot, now_unix_ns};
 use crate::pacer::Pacer;
 
 #[derive(Debug, Clone)]
@@ -69,8 +69,6 @@ pub struct SimRobotSummary {
     pub nominal_base_height: f32,
 }
 
-type CommandSlot = Arc<Mutex<Option<(RobotCommand, Instant)>>>;
-
 /// Runs the stand-in robot until cancelled or `opts.duration` has passed.
 pub async fn run_sim_robot(
     session: &zenoh::Session,
@@ -86,48 +84,13 @@ pub async fn run_sim_robot(
         )));
     }
     let zerr = |e: zenoh::Error| DeployError::Zenoh(e.to_string());
-    let slot: CommandSlot = Arc::new(Mutex::new(None));
-    let rejected = Arc::new(AtomicU64::new(0));
-    let received = Arc::new(AtomicU64::new(0));
-    let sub = {
-        let (slot, rejected, received) = (slot.clone(), rejected.clone(), received.clone());
-        let robot_id = opts.robot_id.clone();
-        session
-            .declare_subscriber(keys::robot_command(&opts.robot_id))
-            .callback(move |sample| {
-                let at = Instant::now();
-                let cmd = codec::decode::<RobotCommand>(&sample.payload().to_bytes())
-                    .map_err(|e| e.to_string())
-                    .and_then(|c| {
-                        c.validate(NUM_JOINTS)
-                            .map(|()| c)
-                            .map_err(|e| e.to_string())
-                    })
-                    .and_then(|c| {
-                        if c.robot_id == robot_id {
-                            Ok(c)
-                        } else {
-                            Err(format!("command for robot id {:?}", c.robot_id))
-                        }
-                    });
-                match cmd {
-                    Ok(c) => {
-                        received.fetch_add(1, Ordering::Relaxed);
-                        if let Ok(mut s) = slot.lock() {
-                            *s = Some((c, at));
-                        }
-                    }
-                    Err(e) => {
-                        let n = rejected.fetch_add(1, Ordering::Relaxed) + 1;
-                        if n.is_power_of_two() {
-                            warn!(rejected = n, "rejected robot command: {e}");
-                        }
-                    }
-                }
-            })
-            .await
-            .map_err(zerr)?
-    };
+    let commands = LatestSlot::<RobotCommand>::subscribe(
+        session,
+        keys::robot_command(&opts.robot_id),
+        &opts.robot_id,
+        NUM_JOINTS,
+    )
+    .await?;
     let states = session
         .declare_publisher(keys::robot_state(&opts.robot_id))
         .priority(Priority::RealTime)
@@ -160,7 +123,6 @@ pub async fn run_sim_robot(
         "sim-robot up: joints limp until the first command"
     );
 
-    let (received_c, rejected_c) = (received.clone(), rejected.clone());
     let summary = tokio::task::spawn_blocking(move || {
         let physics_dt = Duration::from_secs_f32(cfg.dt);
         let publish_every = (200 / opts.state_hz) as u64;
@@ -182,7 +144,7 @@ pub async fn run_sim_robot(
         let timeout = Duration::from_secs_f32(opts.command_timeout_s);
         while !cancel.is_cancelled() && opts.duration.is_none_or(|d| start.elapsed() < d) {
             let (now, _) = pacer.wait();
-            let latest = slot.lock().ok().and_then(|s| s.clone());
+            let latest = commands.get();
             let mut mode = ControlMode::ZeroTorque;
             if let Some((cmd, at)) = latest {
                 if now.saturating_duration_since(at) > timeout {
@@ -230,9 +192,9 @@ pub async fn run_sim_robot(
                 height_sum += state.base_pos[2] as f64;
                 summary.policy_min_base_height =
                     summary.policy_min_base_height.min(state.base_pos[2]);
-                let g = projected_gravity(state.base_quat);
-                let tilt = (-g[2]).clamp(-1.0, 1.0).acos().to_degrees();
-                summary.policy_max_tilt_deg = summary.policy_max_tilt_deg.max(tilt);
+                summary.policy_max_tilt_deg = summary
+                    .policy_max_tilt_deg
+                    .max(tilt_degrees(state.base_quat));
                 summary.policy_displacement = [
                     state.base_pos[0] - start_pos[0],
                     state.base_pos[1] - start_pos[1],
@@ -244,10 +206,7 @@ pub async fn run_sim_robot(
                     wire_version: WIRE_VERSION,
                     robot_id: opts.robot_id.clone(),
                     seq,
-                    stamp_ns: std::time::SystemTime::now()
-                        .duration_since(std::time::UNIX_EPOCH)
-                        .map(|d| d.as_nanos() as u64)
-                        .unwrap_or(0),
+                    stamp_ns: now_unix_ns(),
                     base_quat: state.base_quat,
                     base_lin_vel: state.lin_vel_b(),
                     base_ang_vel: state.ang_vel_b(),
@@ -274,14 +233,11 @@ pub async fn run_sim_robot(
         } else {
             summary.policy_min_base_height = 0.0;
         }
+        summary.commands_received = commands.accepted();
+        summary.commands_rejected = commands.rejected();
         summary
     })
     .await
     .map_err(|e| DeployError::Config(format!("sim-robot thread: {e}")))?;
-    drop(sub);
-    Ok(SimRobotSummary {
-        commands_received: received_c.load(Ordering::Relaxed),
-        commands_rejected: rejected_c.load(Ordering::Relaxed),
-        ..summary
-    })
+    Ok(summary)
 }

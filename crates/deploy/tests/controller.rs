@@ -3,9 +3,10 @@
 //! checks refuse what does not fit the robot.
 
 use l3p_deploy::controller::{Latest, PolicyFn};
+use l3p_deploy::io::standing_state;
 use l3p_deploy::{Controller, Fault, ObservationBuilder, SafetyConfig, load_policy, robot_io};
 use l3p_policy::RobotIo;
-use l3p_proto::{ControlMode, OperatorAction, RobotState, WIRE_VERSION};
+use l3p_proto::{ControlMode, OperatorAction, RobotState};
 use l3p_robots::catalog::RobotSpec;
 use l3p_robots::config::{EnvConfig, TerrainPreset};
 use l3p_robots::task::{Task, TaskEnvState, quat_from_yaw, quat_rotate_inverse};
@@ -32,17 +33,21 @@ fn a1_io() -> RobotIo {
 
 fn standing(io: &RobotIo) -> RobotState {
     RobotState {
-        wire_version: WIRE_VERSION,
-        robot_id: "dog".into(),
         seq: 1,
-        stamp_ns: 0,
-        base_quat: [1.0, 0.0, 0.0, 0.0],
-        base_lin_vel: [0.0; 3],
-        base_ang_vel: [0.0; 3],
-        joint_pos: io.default_joint_pos.clone(),
-        joint_vel: vec![0.0; 12],
         command: [0.5, 0.0, 0.0],
+        ..standing_state(io, "dog")
     }
+}
+
+/// One tick at `t` with `state` received at `received_at`.
+fn tick_at(
+    c: &mut Controller,
+    t: f64,
+    state: &RobotState,
+    received_at: f64,
+    policy: &mut dyn PolicyFn,
+) -> l3p_deploy::controller::TickOutput {
+    c.tick(t, Some(Latest { state, received_at }), policy)
 }
 
 /// A policy returning a fixed action (or NaN), counting its calls.
@@ -200,14 +205,7 @@ fn in_policy(io: &RobotIo, policy: &mut Fixed) -> (Controller, f64) {
     let mut t = 0.0;
     while c.mode() != ControlMode::Policy {
         t += DT;
-        c.tick(
-            t,
-            Some(Latest {
-                state: &state,
-                received_at: t,
-            }),
-            policy,
-        );
+        tick_at(&mut c, t, &state, t, policy);
         assert!(t < 10.0, "never reached policy mode");
     }
     (c, t)
@@ -222,14 +220,7 @@ fn policy_targets_are_scaled_and_clipped_to_soft_limits() {
     };
     let (mut c, t) = in_policy(&io, &mut policy);
     let state = standing(&io);
-    let out = c.tick(
-        t + DT,
-        Some(Latest {
-            state: &state,
-            received_at: t + DT,
-        }),
-        &mut policy,
-    );
+    let out = tick_at(&mut c, t + DT, &state, t + DT, &mut policy);
     assert_eq!(out.command.mode, ControlMode::Policy);
     for j in 0..12 {
         let want = (io.default_joint_pos[j] + 0.25 * 0.4)
@@ -241,14 +232,7 @@ fn policy_targets_are_scaled_and_clipped_to_soft_limits() {
     assert!(obs[36..48].iter().all(|a| (*a - 0.4).abs() < 1e-6));
     // A huge action is clipped to ±action_clip, then to the soft limits.
     policy.action = 1e9;
-    let out = c.tick(
-        t + 2.0 * DT,
-        Some(Latest {
-            state: &state,
-            received_at: t + 2.0 * DT,
-        }),
-        &mut policy,
-    );
+    let out = tick_at(&mut c, t + 2.0 * DT, &state, t + 2.0 * DT, &mut policy);
     assert_eq!(out.command.mode, ControlMode::Policy);
     for j in 0..12 {
         let [lo, hi] = io.soft_joint_limits[j];
@@ -271,14 +255,7 @@ fn stale_state_damps_within_three_periods_and_stays_damped() {
     let mut t = t0;
     let damped_at = loop {
         t += DT;
-        let out = c.tick(
-            t,
-            Some(Latest {
-                state: &state,
-                received_at: last_state_at,
-            }),
-            &mut policy,
-        );
+        let out = tick_at(&mut c, t, &state, last_state_at, &mut policy);
         match out.command.mode {
             ControlMode::Policy => policy_ticks_after += 1,
             ControlMode::Damping => {
@@ -298,14 +275,7 @@ fn stale_state_damps_within_three_periods_and_stays_damped() {
     // Fresh states again: still damping (latched) until the operator resumes.
     for k in 1..20 {
         let now = damped_at + k as f64 * DT;
-        let out = c.tick(
-            now,
-            Some(Latest {
-                state: &state,
-                received_at: now,
-            }),
-            &mut policy,
-        );
+        let out = tick_at(&mut c, now, &state, now, &mut policy);
         assert_eq!(out.command.mode, ControlMode::Damping);
     }
     let now = damped_at + 20.0 * DT;
@@ -359,14 +329,7 @@ fn non_finite_action_and_tilt_damp() {
     let (mut c, t) = in_policy(&io, &mut policy);
     let state = standing(&io);
     policy.action = f32::NAN;
-    let out = c.tick(
-        t + DT,
-        Some(Latest {
-            state: &state,
-            received_at: t + DT,
-        }),
-        &mut policy,
-    );
+    let out = tick_at(&mut c, t + DT, &state, t + DT, &mut policy);
     assert_eq!(out.command.mode, ControlMode::Damping);
     assert_eq!(out.new_fault, Some(Fault::NonFiniteAction));
     assert!(out.command.joint_pos_target.iter().all(|q| q.is_finite()));
@@ -379,14 +342,7 @@ fn non_finite_action_and_tilt_damp() {
             calls: 0,
         },
     );
-    let out = c.tick(
-        t + DT,
-        Some(Latest {
-            state: &state,
-            received_at: t + DT,
-        }),
-        &mut policy,
-    );
+    let out = tick_at(&mut c, t + DT, &state, t + DT, &mut policy);
     assert_eq!(out.new_fault, Some(Fault::NonFiniteAction));
 
     let (mut c, t) = in_policy(
@@ -399,14 +355,7 @@ fn non_finite_action_and_tilt_damp() {
     let mut tilted = state.clone();
     let a: f32 = 70f32.to_radians() / 2.0;
     tilted.base_quat = [a.cos(), a.sin(), 0.0, 0.0];
-    let out = c.tick(
-        t + DT,
-        Some(Latest {
-            state: &tilted,
-            received_at: t + DT,
-        }),
-        &mut policy,
-    );
+    let out = tick_at(&mut c, t + DT, &tilted, t + DT, &mut policy);
     assert!(matches!(out.new_fault, Some(Fault::Tilt { degrees }) if (degrees - 70.0).abs() < 0.5));
 }
 
