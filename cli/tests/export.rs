@@ -1,0 +1,106 @@
+//! `l3p export --format safetensors`: from a deploy export missing the robot I/O contract and from a
+//! checkpoint-less export alike, the written policy.safetensors + policy.json carry weights and the
+//! controller contract, and `deploy/examples/numpy_policy.py` (the README's numpy snippet) computes the
+//! same actions as the deploy controller's inference. The Python half is skipped, saying so, when
+//! python3 with numpy is not installed.
+
+use std::path::Path;
+use std::process::Command;
+
+use l3p_policy::DeployPolicy;
+
+fn repo() -> &'static Path {
+    Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/.."))
+}
+
+#[test]
+fn export_then_numpy_gives_the_deploy_actions() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("export");
+    let source = repo().join("docs/a1-flat-session1/policy");
+    let out = Command::new(env!("CARGO_BIN_EXE_l3p"))
+        .args([
+            "export",
+            source.to_str().unwrap(),
+            "--format",
+            "safetensors",
+            "-o",
+        ])
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let policy = DeployPolicy::load(&out_dir).unwrap();
+    let io = policy
+        .config
+        .io
+        .clone()
+        .expect("export carries the robot I/O contract");
+    assert_eq!(io.joint_names.len(), 12);
+    assert_eq!(io.obs_layout.iter().map(|s| s.len).sum::<usize>(), 48);
+    let json: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out_dir.join("policy.json")).unwrap()).unwrap();
+    assert_eq!(json["robot"], "a1");
+    assert!((json["io"]["control_dt"].as_f64().unwrap() - 0.02).abs() < 1e-6);
+
+    // A wrong --robot is refused.
+    let out = Command::new(env!("CARGO_BIN_EXE_l3p"))
+        .args(["export", source.to_str().unwrap(), "--robot", "go1", "-o"])
+        .arg(dir.path().join("x"))
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not go1"));
+
+    // Observations around the standing pose and some far from it.
+    let mut obs = Vec::new();
+    for k in 0..16 {
+        let row: Vec<f32> = (0..48)
+            .map(|i| ((i * 7 + k * 13) % 17) as f32 / 17.0 - 0.5)
+            .map(|v| v * (1.0 + k as f32 / 4.0))
+            .collect();
+        obs.push(row);
+    }
+    let flat: Vec<f32> = obs.iter().flatten().copied().collect();
+    let expected = policy.act(&flat).unwrap();
+
+    let numpy_ok = Command::new("python3")
+        .args(["-c", "import numpy"])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !numpy_ok {
+        eprintln!(
+            "SKIPPED numpy half of export_then_numpy_gives_the_deploy_actions: python3 with numpy is \
+             not installed (pip install numpy)"
+        );
+        return;
+    }
+    let obs_file = dir.path().join("obs.json");
+    std::fs::write(&obs_file, serde_json::to_vec(&obs).unwrap()).unwrap();
+    let out = Command::new("python3")
+        .arg(repo().join("deploy/examples/numpy_policy.py"))
+        .arg(&out_dir)
+        .arg(&obs_file)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let got: Vec<Vec<f32>> = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(got.len(), 16);
+    for (k, row) in got.iter().enumerate() {
+        for (j, a) in row.iter().enumerate() {
+            let e = expected[k * 12 + j];
+            assert!(
+                (a - e).abs() <= 1e-4 * (1.0 + e.abs()),
+                "obs {k} action {j}: numpy {a} vs l3p {e}"
+            );
+        }
+    }
+}
