@@ -19,6 +19,7 @@ use l3p_proto::{
 };
 use l3p_robots::catalog::RobotSpec;
 use l3p_robots::config::EnvConfig;
+use l3p_robots::gait::{GaitReport, TrackingSummary};
 use l3p_robots::task::DoneReason;
 use l3p_robots::vecenv::VecEnv;
 use rand::SeedableRng;
@@ -48,6 +49,21 @@ pub trait RolloutEnv: Send + 'static {
     ) -> Result<(), ActorError>;
     /// Mean base height above the ground under it over the envs (m), where the env knows it.
     fn mean_base_height(&self) -> Option<f32> {
+        None
+    }
+    /// Names of the reward terms each finished episode reports (`EpisodeStats::reward_terms`).
+    fn reward_term_names(&self) -> Vec<String> {
+        Vec::new()
+    }
+    /// Seconds spent per simulation stage since the last call (`physics`, `observations`,
+    /// `rewards`, `resets`, `env_total`), then clears them; empty where the env does not time them.
+    fn take_stage_seconds(&mut self) -> Vec<(&'static str, f64)> {
+        Vec::new()
+    }
+    /// Starts gait diagnostics, where the env can measure them.
+    fn enable_gait_meter(&mut self) {}
+    /// Gait diagnostics since [`RolloutEnv::enable_gait_meter`].
+    fn gait_report(&self) -> Option<GaitReport> {
         None
     }
 }
@@ -115,6 +131,7 @@ impl RolloutEnv for SimEnv {
             lin_vel_error: e.lin_vel_error,
             yaw_rate_error: e.ang_vel_error,
             terminated: e.reason != DoneReason::TimeOut,
+            reward_terms: e.terms.to_vec(),
         }));
         Ok(())
     }
@@ -127,6 +144,29 @@ impl RolloutEnv for SimEnv {
             .sum();
         (n > 0).then(|| sum / n as f32)
     }
+    fn reward_term_names(&self) -> Vec<String> {
+        l3p_robots::task::RewardTerm::ALL
+            .iter()
+            .map(|t| t.name().to_string())
+            .collect()
+    }
+    fn take_stage_seconds(&mut self) -> Vec<(&'static str, f64)> {
+        let t = self.env.timings();
+        self.env.reset_timings();
+        vec![
+            ("physics", t.physics.as_secs_f64()),
+            ("observations", t.observations.as_secs_f64()),
+            ("rewards", t.rewards.as_secs_f64()),
+            ("resets", t.resets.as_secs_f64()),
+            ("env_total", t.total.as_secs_f64()),
+        ]
+    }
+    fn enable_gait_meter(&mut self) {
+        self.env.enable_gait_meter();
+    }
+    fn gait_report(&self) -> Option<GaitReport> {
+        Some(self.env.gait_report())
+    }
 }
 
 /// Fills rollout chunks from an environment with a policy; buffers are reused between chunks.
@@ -135,6 +175,10 @@ pub struct Collector<E: RolloutEnv> {
     rng: StdRng,
     scratch: InferScratch,
     means: Vec<f32>,
+    /// Seconds of policy inference + action sampling in the last `collect`.
+    pub inference_seconds: f64,
+    /// The env's stage seconds during the last `collect` (see [`RolloutEnv::take_stage_seconds`]).
+    pub stage_seconds: Vec<(&'static str, f64)>,
 }
 
 impl<E: RolloutEnv> Collector<E> {
@@ -144,6 +188,8 @@ impl<E: RolloutEnv> Collector<E> {
             rng: StdRng::seed_from_u64(seed),
             scratch: InferScratch::default(),
             means: Vec::new(),
+            inference_seconds: 0.0,
+            stage_seconds: Vec::new(),
         }
     }
 
@@ -168,14 +214,21 @@ impl<E: RolloutEnv> Collector<E> {
         }
         let start = Instant::now();
         chunk.episodes.clear();
+        if chunk.reward_terms.is_empty() {
+            chunk.reward_terms = self.env.reward_term_names();
+        }
         let std = policy.std().to_vec();
+        let _ = self.env.take_stage_seconds();
+        let mut inference = std::time::Duration::ZERO;
         for t in 0..chunk.steps as usize {
+            let infer_start = Instant::now();
             let obs_rows = t * n * od..(t + 1) * n * od;
             chunk.observations[obs_rows].copy_from_slice(self.env.observations());
             policy
                 .act_into(self.env.observations(), &mut self.means, &mut self.scratch)
                 .map_err(|e| ActorError::Policy(e.to_string()))?;
             let (actions, log_probs) = policy.sample(&self.means, &mut self.rng);
+            inference += infer_start.elapsed();
             let act_rows = t * n * ad..(t + 1) * n * ad;
             chunk.actions[act_rows.clone()].copy_from_slice(&actions);
             chunk.action_means[act_rows.clone()].copy_from_slice(&self.means);
@@ -196,6 +249,8 @@ impl<E: RolloutEnv> Collector<E> {
             .last_observations
             .copy_from_slice(self.env.observations());
         chunk.collect_seconds = start.elapsed().as_secs_f32();
+        self.inference_seconds = inference.as_secs_f64();
+        self.stage_seconds = self.env.take_stage_seconds();
         Ok(())
     }
 }
@@ -439,7 +494,12 @@ pub async fn run<E: RolloutEnv>(
         );
         record.insert("send_seconds", send_seconds);
         record.insert("fetch_seconds", fetch_seconds);
+        record.insert("time/inference_seconds", col.inference_seconds);
+        for (stage, seconds) in &col.stage_seconds {
+            record.insert(&format!("time/{stage}_seconds"), *seconds);
+        }
         record.insert_episode_means(&ch.episodes);
+        record.insert_reward_term_means([(ch.reward_terms.as_slice(), ch.episodes.as_slice())]);
         if let Ok(json) = codec::encode_json(&record) {
             let _ = session.put(&metrics_key, json).await;
         }
@@ -465,6 +525,20 @@ pub struct EvalSummary {
     /// Mean base height above the ground over all envs and steps (m; `None` if the env does not
     /// report it): a walking policy stays near the robot's standing height, a crawling one does not.
     pub mean_base_height: Option<f32>,
+    /// Gait diagnostics (base height, swing shares, non-foot contacts, chatter, ...), where the
+    /// env measures them.
+    pub gait: Option<GaitReport>,
+}
+
+impl EvalSummary {
+    /// The tracking half, for [`l3p_robots::gait::WalkCriterion::failures`].
+    pub fn tracking(&self) -> TrackingSummary {
+        TrackingSummary {
+            lin_vel_error: self.lin_vel_error,
+            yaw_rate_error: self.yaw_rate_error,
+            fall_fraction: self.fall_fraction,
+        }
+    }
 }
 
 /// Play `policy` deterministically (action means, no exploration noise) until `episodes` episodes
@@ -487,6 +561,7 @@ pub fn evaluate<E: RolloutEnv>(
         (vec![0.0; n], vec![false; n], vec![false; n]);
     let (mut means, mut scratch, mut finished) = (Vec::new(), InferScratch::default(), Vec::new());
     let (mut height_sum, mut height_steps) = (0.0f64, 0u32);
+    env.enable_gait_meter();
     for _ in 0..max_steps {
         policy
             .act_into(env.observations(), &mut means, &mut scratch)
@@ -517,5 +592,6 @@ pub fn evaluate<E: RolloutEnv>(
         yaw_rate_error: mean(&|e| e.yaw_rate_error),
         fall_fraction: mean(&|e| if e.terminated { 1.0 } else { 0.0 }),
         mean_base_height: (height_steps > 0).then(|| (height_sum / height_steps as f64) as f32),
+        gait: env.gait_report(),
     })
 }

@@ -38,6 +38,84 @@ pub struct EvalArgs {
     /// Seed.
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
+    /// Evaluate at each of these constant forward speeds (m/s) separately, with zero lateral and
+    /// yaw commands and heading mode off (what the walk criterion uses), e.g. `0.5,1.0`.
+    #[arg(long, value_delimiter = ',', num_args = 1, value_name = "V,...")]
+    pub forward: Option<Vec<f32>>,
+    /// Print the results as JSON (one object: settings, and per speed tracking, gait, walk verdict).
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub pins: PhysicsPins,
+}
+
+/// Pins a randomised physical quantity at one value for the evaluation (otherwise the config's
+/// training ranges apply), so a policy can be judged at the extremes.
+#[derive(Debug, Clone, Default, Args)]
+pub struct PhysicsPins {
+    /// Passive joint damping (N·m·s/rad).
+    #[arg(long)]
+    pub joint_damping: Option<f32>,
+    /// Coulomb joint friction (N·m).
+    #[arg(long)]
+    pub joint_friction: Option<f32>,
+    /// Motor strength (torque scale).
+    #[arg(long)]
+    pub motor_strength: Option<f32>,
+    /// PD stiffness scale.
+    #[arg(long)]
+    pub kp_scale: Option<f32>,
+    /// PD damping scale.
+    #[arg(long)]
+    pub kd_scale: Option<f32>,
+    /// Action latency (ms).
+    #[arg(long)]
+    pub latency_ms: Option<f32>,
+    /// Ground/foot friction coefficient.
+    #[arg(long)]
+    pub ground_friction: Option<f32>,
+    /// Mass added to the base (kg).
+    #[arg(long)]
+    pub added_mass: Option<f32>,
+    /// Keep the config's pushes during evaluation (off by default: pushes are a training aid).
+    #[arg(long)]
+    pub pushes: bool,
+}
+
+impl PhysicsPins {
+    /// Writes the pins into `[env.randomization]` overrides.
+    pub fn apply(&self, env: &mut l3p_robots::config::EnvConfig) {
+        let r = &mut env.randomization;
+        let pin = |v: Option<f32>| v.map(|x| [x, x]);
+        if let Some(v) = pin(self.joint_damping) {
+            r.joint_damping = Some(v);
+        }
+        if let Some(v) = pin(self.joint_friction) {
+            r.joint_friction = Some(v);
+        }
+        if let Some(v) = pin(self.motor_strength) {
+            r.motor_strength = Some(v);
+        }
+        if let Some(v) = pin(self.kp_scale) {
+            r.kp_scale = Some(v);
+        }
+        if let Some(v) = pin(self.kd_scale) {
+            r.kd_scale = Some(v);
+        }
+        if let Some(v) = pin(self.latency_ms.map(|ms| ms / 1000.0)) {
+            r.latency_s = Some(v);
+        }
+        if let Some(v) = pin(self.ground_friction) {
+            r.static_friction = Some(v);
+            r.dynamic_friction = Some(v);
+        }
+        if let Some(v) = pin(self.added_mass) {
+            r.added_base_mass = Some(v);
+        }
+        if !self.pushes {
+            r.pushes = Some(false);
+        }
+    }
 }
 
 /// Load a deployable policy from a path or from the local registry.
@@ -55,6 +133,63 @@ pub fn load_policy(reference: &str, data_dir: &Path) -> anyhow::Result<DeployPol
         );
     }
     Ok(DeployPolicy::from_bytes(&bytes)?)
+}
+
+/// One evaluation: settings in, tracking + gait + walk verdict out.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct EvalRow {
+    /// Forward speed command (m/s), or `None` for the config's command distribution.
+    pub forward: Option<f32>,
+    pub episodes: usize,
+    pub episode_return: f32,
+    pub episode_length: f32,
+    pub terrain_level: f32,
+    pub lin_vel_error: f32,
+    pub yaw_rate_error: f32,
+    pub fall_fraction: f32,
+    pub gait: Option<l3p_robots::gait::GaitReport>,
+    /// Walk-criterion bounds that fail (empty: it walks).
+    pub walk_failures: Vec<String>,
+}
+
+/// Sets a constant forward command: vx = v, vy = wz = 0, heading mode off, nobody standing.
+pub fn constant_forward_command(env: &mut l3p_robots::config::EnvConfig, v: f32) {
+    env.commands.lin_vel_x = [v, v];
+    env.commands.lin_vel_y = [0.0, 0.0];
+    env.commands.ang_vel_z = [0.0, 0.0];
+    env.commands.heading_command = false;
+    env.commands.rel_standing_envs = 0.0;
+}
+
+/// Plays `policy` on `robot` with `env` and applies the walk criterion.
+pub fn evaluate_row(
+    robot: &l3p_robots::catalog::RobotSpec,
+    env: &l3p_robots::config::EnvConfig,
+    policy: &DeployPolicy,
+    envs: usize,
+    episodes: usize,
+    seed: u64,
+    forward: Option<f32>,
+) -> anyhow::Result<EvalRow> {
+    let mut sim = l3p_actor::sim_env(robot, env, envs, 1, seed)?;
+    let max_steps = 1000 * (episodes / envs.max(1) + 2);
+    let s = l3p_actor::evaluate(&mut sim, policy, episodes, max_steps)?;
+    let walk_failures = match &s.gait {
+        Some(g) => l3p_robots::gait::WalkCriterion::default().failures(&s.tracking(), g),
+        None => vec!["no gait diagnostics".into()],
+    };
+    Ok(EvalRow {
+        forward,
+        episodes: s.episodes,
+        episode_return: s.episode_return,
+        episode_length: s.episode_length,
+        terrain_level: s.terrain_level,
+        lin_vel_error: s.lin_vel_error,
+        yaw_rate_error: s.yaw_rate_error,
+        fall_fraction: s.fall_fraction,
+        gait: s.gait,
+        walk_failures,
+    })
 }
 
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
@@ -78,41 +213,192 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         if range.len() != 2 || range[0] > range[1] {
             anyhow::bail!("--lin-vel-x takes MIN,MAX with MIN <= MAX, got {range:?}");
         }
+        constant_forward_command(&mut config.env, range[0]);
         config.env.commands.lin_vel_x = [range[0], range[1]];
-        config.env.commands.lin_vel_y = [0.0, 0.0];
-        config.env.commands.ang_vel_z = [0.0, 0.0];
-        config.env.commands.heading_command = false;
-        config.env.commands.rel_standing_envs = 0.0;
     }
+    args.pins.apply(&mut config.env);
     let robot = l3p_robots::catalog::RobotSpec::by_name(&args.robot)?;
-    let mut env = l3p_actor::sim_env(robot, &config.env, args.envs, 1, args.seed)?;
-    let max_steps = 1000 * (args.episodes / args.envs.max(1) + 2);
-    let s = l3p_actor::evaluate(&mut env, &policy, args.episodes, max_steps)?;
-    println!(
-        "policy {} on {} ({} terrain), {} episodes",
-        args.policy, robot.name, args.terrain, s.episodes
-    );
-    println!("  xy-velocity tracking error  {:.3} m/s", s.lin_vel_error);
-    println!(
-        "  yaw-rate tracking error     {:.3} rad/s",
-        s.yaw_rate_error
-    );
-    println!("  episode reward              {:.3}", s.episode_return);
-    println!(
-        "  episode length              {:.1} steps",
-        s.episode_length
-    );
-    println!("  terrain level               {:.2}", s.terrain_level);
-    println!(
-        "  falls                       {:.1}%",
-        100.0 * s.fall_fraction
-    );
-    if let Some(h) = s.mean_base_height {
-        let standing = robot.nominal_standing_height()?;
-        println!(
-            "  base height above ground    {h:.3} m ({:.0}% of the {standing:.3} m standing height)",
-            100.0 * h / standing
-        );
+    let speeds: Vec<Option<f32>> = match &args.forward {
+        Some(v) if v.iter().any(|x| !x.is_finite()) => {
+            anyhow::bail!("--forward takes finite speeds, got {v:?}")
+        }
+        Some(v) => v.iter().map(|x| Some(*x)).collect(),
+        None => vec![None],
+    };
+    let mut rows = Vec::new();
+    for forward in &speeds {
+        let mut env = config.env.clone();
+        if let Some(v) = forward {
+            constant_forward_command(&mut env, *v);
+        }
+        rows.push(evaluate_row(
+            robot,
+            &env,
+            &policy,
+            args.envs,
+            args.episodes,
+            args.seed,
+            *forward,
+        )?);
     }
+    if args.json {
+        let out = serde_json::json!({
+            "policy": args.policy,
+            "robot": robot.name,
+            "terrain": args.terrain,
+            "pins": {
+                "joint_damping": args.pins.joint_damping,
+                "joint_friction": args.pins.joint_friction,
+                "motor_strength": args.pins.motor_strength,
+                "kp_scale": args.pins.kp_scale,
+                "kd_scale": args.pins.kd_scale,
+                "latency_ms": args.pins.latency_ms,
+                "ground_friction": args.pins.ground_friction,
+                "added_mass": args.pins.added_mass,
+                "pushes": args.pins.pushes,
+            },
+            "rows": rows,
+            "walks": rows.iter().all(|r| r.walk_failures.is_empty()),
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!(
+        "policy {} on {} ({} terrain)",
+        args.policy, robot.name, args.terrain
+    );
+    print!("{}", format_rows(&rows));
     Ok(())
+}
+
+/// The human-readable table: one column per evaluated command.
+pub fn format_rows(rows: &[EvalRow]) -> String {
+    use std::fmt::Write;
+    let mut out = String::new();
+    let col = |f: &dyn Fn(&EvalRow) -> String| -> String {
+        rows.iter()
+            .map(|r| format!("{:>16}", f(r)))
+            .collect::<String>()
+    };
+    let gait = |r: &EvalRow, f: &dyn Fn(&l3p_robots::gait::GaitReport) -> String| {
+        r.gait.as_ref().map(f).unwrap_or_else(|| "-".into())
+    };
+    let lines: Vec<(&str, String)> = vec![
+        (
+            "command",
+            col(&|r| match r.forward {
+                Some(v) => format!("vx {v:.2} m/s"),
+                None => "training mix".into(),
+            }),
+        ),
+        ("episodes", col(&|r| r.episodes.to_string())),
+        (
+            "xy-velocity tracking error",
+            col(&|r| format!("{:.3} m/s", r.lin_vel_error)),
+        ),
+        (
+            "yaw-rate tracking error",
+            col(&|r| format!("{:.3} rad/s", r.yaw_rate_error)),
+        ),
+        (
+            "falls",
+            col(&|r| format!("{:.1}%", 100.0 * r.fall_fraction)),
+        ),
+        (
+            "episode reward",
+            col(&|r| format!("{:.3}", r.episode_return)),
+        ),
+        (
+            "episode length",
+            col(&|r| format!("{:.1} steps", r.episode_length)),
+        ),
+        ("terrain level", col(&|r| format!("{:.2}", r.terrain_level))),
+        (
+            "base height above ground",
+            col(&|r| gait(r, &|g| format!("{:.3} m", g.base_height_mean))),
+        ),
+        (
+            "  % of standing",
+            col(&|r| {
+                gait(r, &|g| {
+                    format!("{:.0}% of {:.2}", g.base_height_pct, g.standing_height)
+                })
+            }),
+        ),
+        (
+            "  min",
+            col(&|r| gait(r, &|g| format!("{:.3} m", g.base_height_min))),
+        ),
+        (
+            "swing share FL FR RL RR",
+            col(&|r| {
+                gait(r, &|g| {
+                    g.swing_share
+                        .iter()
+                        .map(|s| format!("{:.0}", 100.0 * s))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                })
+            }),
+        ),
+        (
+            "touchdowns/s FL FR RL RR",
+            col(&|r| {
+                gait(r, &|g| {
+                    g.touchdown_hz
+                        .iter()
+                        .map(|s| format!("{s:.1}"))
+                        .collect::<Vec<_>>()
+                        .join(" ")
+                })
+            }),
+        ),
+        (
+            "non-foot ground contact",
+            col(&|r| {
+                gait(r, &|g| {
+                    format!("{:.1}% steps", 100.0 * g.non_foot_contact_share)
+                })
+            }),
+        ),
+        (
+            "joint-target change RMS",
+            col(&|r| gait(r, &|g| format!("{:.3} rad", g.target_change_rms))),
+        ),
+        (
+            "mean |torque|",
+            col(&|r| gait(r, &|g| format!("{:.2} N·m", g.mean_abs_torque))),
+        ),
+        (
+            "mechanical power",
+            col(&|r| gait(r, &|g| format!("{:.1} W", g.mean_power))),
+        ),
+        (
+            "heading drift / episode",
+            col(&|r| gait(r, &|g| format!("{:.1}°", g.heading_drift_rad.to_degrees()))),
+        ),
+        (
+            "walk criterion",
+            col(&|r| {
+                if r.walk_failures.is_empty() {
+                    "PASS".into()
+                } else {
+                    format!("FAIL ({})", r.walk_failures.len())
+                }
+            }),
+        ),
+    ];
+    for (name, values) in lines {
+        let _ = writeln!(out, "  {name:<28}{values}");
+    }
+    for r in rows {
+        for f in &r.walk_failures {
+            let label = match r.forward {
+                Some(v) => format!("vx {v:.2}"),
+                None => "mix".into(),
+            };
+            let _ = writeln!(out, "  [{label}] {f}");
+        }
+    }
+    out
 }

@@ -35,6 +35,62 @@ pub struct TrainArgs {
     /// No progress bar (log lines instead).
     #[arg(long)]
     pub quiet: bool,
+    /// Time to walk: every --eval-every iterations evaluate the latest checkpoint against the walk
+    /// criterion (forward 0.5 and 1.0 m/s, joint damping at the top of its randomisation range) and
+    /// stop as soon as it holds; prints and writes `<run_dir>/walk.json` (wall-clock, samples,
+    /// iterations, the evaluation).
+    #[arg(long)]
+    pub until_walks: bool,
+    /// Iterations between walk evaluations (with --until-walks).
+    #[arg(long, default_value_t = 25)]
+    pub eval_every: u64,
+}
+
+/// One walk evaluation of a checkpoint during `--until-walks`.
+struct WalkCheck {
+    iteration: u64,
+    rows: Vec<crate::eval_cmd::EvalRow>,
+}
+
+/// Evaluates `<run_dir>/checkpoints/latest.ckpt` on the first actor's robot against the walk
+/// criterion: forward 0.5 and 1.0 m/s, joint damping pinned at the top of the training range,
+/// pushes off, the rest of the training randomisation on.
+fn walk_check(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<WalkCheck> {
+    let ckpt =
+        l3p_policy::load_checkpoint(&daemon::checkpoint_path(run_dir), &l3p_policy::cpu_device())?;
+    let robot_name = config
+        .actors
+        .first()
+        .map(|a| a.robot.clone())
+        .ok_or_else(|| anyhow::anyhow!("no [[actors]] in the config"))?;
+    let robot = l3p_robots::catalog::RobotSpec::by_name(&robot_name)?;
+    let (bytes, _) = l3p_policy::export_bytes(&ckpt.model, robot.name)?;
+    let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
+    let mut env = config.env.clone();
+    let top_damping = env.randomization(robot.name).joint_damping[1];
+    crate::eval_cmd::PhysicsPins {
+        joint_damping: Some(top_damping),
+        ..Default::default()
+    }
+    .apply(&mut env);
+    let mut rows = Vec::new();
+    for v in [0.5f32, 1.0] {
+        let mut e = env.clone();
+        crate::eval_cmd::constant_forward_command(&mut e, v);
+        rows.push(crate::eval_cmd::evaluate_row(
+            robot,
+            &e,
+            &policy,
+            16,
+            16,
+            11,
+            Some(v),
+        )?);
+    }
+    Ok(WalkCheck {
+        iteration: ckpt.iteration,
+        rows,
+    })
 }
 
 struct ActorProcess {
@@ -64,6 +120,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     }
     l3p_proto::keys::validate_segment("run", &config.run.name)?;
     let opts = learner_cmd::learner_options(&config, true)?;
+    let run_dir = opts.run_dir.clone();
     // Zenoh's usual port when it is free, so `l3p metrics --follow` in another terminal finds the run;
     // the endpoint is also written to <run_dir>/endpoint.
     let port = match std::net::TcpListener::bind(("127.0.0.1", 7447)) {
@@ -129,7 +186,37 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             bar
         };
         let mut watchdog = tokio::time::interval(Duration::from_secs(1));
+        let started = std::time::Instant::now();
+        let samples_per_iteration: u64 = config
+            .actors
+            .iter()
+            .map(|a| (a.envs as u64) * config.rollout.steps_per_env as u64)
+            .sum();
+        let mut walk_task: Option<tokio::task::JoinHandle<anyhow::Result<WalkCheck>>> = None;
+        let mut last_walk_eval = 0u64;
+        let mut walked: Option<(WalkCheck, f64)> = None;
         loop {
+            if walk_task.as_ref().is_some_and(|t| t.is_finished())
+                && let Some(t) = walk_task.take()
+            {
+                match t.await {
+                    Ok(Ok(check)) => {
+                        let fails: usize = check.rows.iter().map(|r| r.walk_failures.len()).sum();
+                        info!(iteration = check.iteration, failing_bounds = fails, "walk check");
+                        for r in &check.rows {
+                            for f in &r.walk_failures {
+                                info!("  vx {:.1}: {f}", r.forward.unwrap_or(f32::NAN));
+                            }
+                        }
+                        if fails == 0 {
+                            walked = Some((check, started.elapsed().as_secs_f64()));
+                            cancel.cancel();
+                        }
+                    }
+                    Ok(Err(e)) => warn!("walk check failed: {e:#}"),
+                    Err(e) => warn!("walk check panicked: {e}"),
+                }
+            }
             tokio::select! {
                 _ = cancel.cancelled() => break,
                 report = progress_rx.recv() => match report {
@@ -142,6 +229,14 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                             v("terrain_level"), v("lin_vel_error"),
                         );
                         bar.set_position(r.iteration);
+                        if args.until_walks
+                            && walk_task.is_none()
+                            && r.iteration >= last_walk_eval + args.eval_every.max(1)
+                        {
+                            last_walk_eval = r.iteration;
+                            let (cfg, dir) = (config.clone(), run_dir.clone());
+                            walk_task = Some(tokio::task::spawn_blocking(move || walk_check(&cfg, &dir)));
+                        }
                         if args.quiet { info!(iteration = r.iteration, "{msg}"); } else { bar.set_message(msg); }
                     }
                 },
@@ -166,6 +261,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
         bar.finish();
         let summary = learner.await??;
+        if let Some(t) = walk_task.take() {
+            t.abort();
+        }
+        if args.until_walks {
+            report_walk(&run_dir, walked.as_ref(), samples_per_iteration)?;
+        }
         for actor in &mut actors {
             let _ = actor.child.kill();
             let _ = actor.child.wait();
@@ -182,4 +283,39 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         );
         Ok(())
     })
+}
+
+/// Prints and writes `<run_dir>/walk.json` for `--until-walks`.
+fn report_walk(
+    run_dir: &std::path::Path,
+    walked: Option<&(WalkCheck, f64)>,
+    samples_per_iteration: u64,
+) -> anyhow::Result<()> {
+    let json = match walked {
+        Some((check, seconds)) => {
+            println!(
+                "walks: iteration {} after {:.0} s wall-clock, {} samples",
+                check.iteration,
+                seconds,
+                check.iteration * samples_per_iteration
+            );
+            print!("{}", crate::eval_cmd::format_rows(&check.rows));
+            serde_json::json!({
+                "walks": true,
+                "iteration": check.iteration,
+                "wall_clock_s": seconds,
+                "samples": check.iteration * samples_per_iteration,
+                "rows": check.rows,
+            })
+        }
+        None => {
+            println!("the walk criterion did not hold before training stopped");
+            serde_json::json!({ "walks": false })
+        }
+    };
+    std::fs::write(
+        run_dir.join("walk.json"),
+        serde_json::to_string_pretty(&json)?,
+    )?;
+    Ok(())
 }

@@ -637,6 +637,11 @@ pub async fn run(
         let mut record = MetricsRecord::new(&run, "learner", new_version, unix_ms());
         update_metrics(&mut record, &update);
         record.insert_episode_means(chunks.iter().flat_map(|c| c.episodes.iter()));
+        record.insert_reward_term_means(
+            chunks
+                .iter()
+                .map(|c| (c.reward_terms.as_slice(), c.episodes.as_slice())),
+        );
         record.insert("iteration_seconds", iteration_seconds);
         record.insert("collect_seconds", collect_seconds);
         record.insert(

@@ -22,7 +22,7 @@ pub use validate::ValidationError;
 
 /// Version of the wire format. Bump it whenever a message's layout changes; a peer that sends another
 /// version gets a clear error instead of garbage.
-pub const WIRE_VERSION: u32 = 1;
+pub const WIRE_VERSION: u32 = 2;
 
 /// A message type that travels on the wire: it carries the version it was written with.
 pub trait WireMessage {

@@ -34,7 +34,13 @@ pub struct EpisodeStats {
     pub yaw_rate_error: f32,
     /// `true` if the episode ended by termination (fall, base contact), `false` if by time-out.
     pub terminated: bool,
+    /// Per reward term, the sum over the episode of its weighted value, in the order of the
+    /// chunk's [`RolloutChunk::reward_terms`] (empty when the actor does not report terms).
+    pub reward_terms: Vec<f32>,
 }
+
+/// Most reward terms a chunk may name.
+pub const MAX_REWARD_TERMS: usize = 64;
 
 /// One actor's rollout for one policy version: `steps` control steps of `num_envs` environments.
 ///
@@ -69,6 +75,8 @@ pub struct RolloutChunk {
     /// The episode ended by time-out: bootstrapped with the value of the state.
     pub truncated: Vec<bool>,
     pub last_observations: Vec<f32>,
+    /// Names of the reward terms in each episode's `reward_terms`.
+    pub reward_terms: Vec<String>,
     /// Episodes that finished during this chunk.
     pub episodes: Vec<EpisodeStats>,
     /// Seconds the actor spent producing this chunk (simulation + inference).
@@ -112,6 +120,7 @@ impl RolloutChunk {
             terminated: vec![false; samples],
             truncated: vec![false; samples],
             last_observations: vec![0.0; num_envs * obs_dim],
+            reward_terms: Vec::new(),
             episodes: Vec::new(),
             collect_seconds: 0.0,
             transport_seconds: 0.0,
@@ -226,6 +235,28 @@ impl MetricsRecord {
         }
         for (kind, (sum, count)) in by_type {
             self.insert(&format!("terrain_level/type{kind}"), sum / count);
+        }
+    }
+
+    /// Record `Episode_Reward/<term>` (IsaacLab's and rsl_rl's name): per reward term, the mean over
+    /// finished episodes of the term's sum over the episode. `chunks` gives each chunk's term names
+    /// and episodes; terms of the same name from several chunks (robots) are averaged together.
+    pub fn insert_reward_term_means<'a>(
+        &mut self,
+        chunks: impl IntoIterator<Item = (&'a [String], &'a [EpisodeStats])>,
+    ) {
+        let mut sums: BTreeMap<&str, (f64, f64)> = BTreeMap::new();
+        for (names, episodes) in chunks {
+            for e in episodes {
+                for (name, v) in names.iter().zip(&e.reward_terms) {
+                    let slot = sums.entry(name.as_str()).or_default();
+                    slot.0 += *v as f64;
+                    slot.1 += 1.0;
+                }
+            }
+        }
+        for (name, (sum, count)) in sums {
+            self.insert(&format!("Episode_Reward/{name}"), sum / count);
         }
     }
 

@@ -172,7 +172,46 @@ impl RolloutChunk {
                 value: self.action_stds[index],
             });
         }
+        if self.reward_terms.len() > crate::messages::MAX_REWARD_TERMS {
+            return Err(ValidationError::Mismatch {
+                what: W,
+                field: "reward_terms",
+                expected: format!("at most {} names", crate::messages::MAX_REWARD_TERMS),
+                got: self.reward_terms.len().to_string(),
+            });
+        }
+        if let Some(index) = self.reward_terms.iter().position(|n| {
+            n.is_empty()
+                || n.len() > 64
+                || !n.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
+        }) {
+            return Err(ValidationError::Mismatch {
+                what: W,
+                field: "reward_terms",
+                expected: "names of 1-64 ASCII letters, digits or '_'".into(),
+                got: format!("{:?} at index {index}", self.reward_terms[index]),
+            });
+        }
         for (index, episode) in self.episodes.iter().enumerate() {
+            if !episode.reward_terms.is_empty()
+                && episode.reward_terms.len() != self.reward_terms.len()
+            {
+                return Err(ValidationError::Mismatch {
+                    what: W,
+                    field: "episodes.reward_terms",
+                    expected: format!("{} values (one per reward term)", self.reward_terms.len()),
+                    got: format!("{} at episode {index}", episode.reward_terms.len()),
+                });
+            }
+            if let Some(v) = episode.reward_terms.iter().find(|v| !v.is_finite()) {
+                return Err(ValidationError::NonFinite {
+                    what: W,
+                    field: "episodes.reward_terms",
+                    index,
+                    value: *v,
+                    position: String::new(),
+                });
+            }
             let values = [
                 episode.episode_return,
                 episode.terrain_level,

@@ -26,10 +26,12 @@ fn episode() -> impl Strategy<Value = EpisodeStats> {
         finite(),
         finite(),
         any::<bool>(),
+        prop::collection::vec(finite(), 2),
     )
         .prop_map(
-            |(episode_return, length, terrain_level, terrain_type, lin, yaw, terminated)| {
+            |(episode_return, length, terrain_level, terrain_type, lin, yaw, terminated, terms)| {
                 EpisodeStats {
+                    reward_terms: terms,
                     episode_return,
                     length,
                     terrain_level,
@@ -79,6 +81,7 @@ fn chunk() -> impl Strategy<Value = RolloutChunk> {
                     c.truncated = trunc;
                     c.last_observations = last;
                     c.episodes = eps;
+                    c.reward_terms = vec!["track_lin_vel_xy_exp".into(), "trot_contact".into()];
                     c
                 })
         })

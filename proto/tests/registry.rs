@@ -186,7 +186,7 @@ proptest! {
 #[test]
 fn unknown_fields_are_refused() {
     let err =
-        codec::decode_json::<RefRequest>(br#"{"wire_version":1,"artifact":"a@1","extra":true}"#)
+        codec::decode_json::<RefRequest>(br#"{"wire_version":2,"artifact":"a@1","extra":true}"#)
             .unwrap_err();
     assert!(err.to_string().contains("unknown field"), "{err}");
 }

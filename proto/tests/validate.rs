@@ -149,7 +149,9 @@ fn episode_means_average_and_split_by_terrain_type() {
             lin_vel_error: 0.1,
             yaw_rate_error: 0.2,
             terminated,
+            reward_terms: vec![level, -1.0],
         });
+        chunk.reward_terms = vec!["tracking".into(), "action_rate_l2".into()];
     }
     let mut record = MetricsRecord::new("r", "learner", 1, 0);
     record.insert_episode_means(&chunk.episodes);
@@ -158,4 +160,17 @@ fn episode_means_average_and_split_by_terrain_type() {
     assert_eq!(record.values["terrain_level/type0"], 3.0);
     assert_eq!(record.values["terrain_level/type3"], 1.0);
     assert!((record.values["fall_fraction"] - 1.0 / 3.0).abs() < 1e-9);
+    record.insert_reward_term_means([(chunk.reward_terms.as_slice(), chunk.episodes.as_slice())]);
+    assert!((record.values["Episode_Reward/tracking"] - 7.0 / 3.0).abs() < 1e-9);
+    assert_eq!(record.values["Episode_Reward/action_rate_l2"], -1.0);
+    chunk.action_stds.fill(1.0);
+    chunk.validate().unwrap();
+    chunk.episodes[1].reward_terms.pop();
+    let err = chunk.validate().unwrap_err().to_string();
+    assert!(err.contains("reward_terms"), "{err}");
+    chunk.episodes[1].reward_terms = vec![f32::NAN, 0.0];
+    assert!(chunk.validate().is_err());
+    chunk.episodes[1].reward_terms = vec![0.0, 0.0];
+    chunk.reward_terms[0] = "bad name/with slash".into();
+    assert!(chunk.validate().is_err());
 }

@@ -17,15 +17,15 @@ conf.insert_json5("mode", '"peer"')
 conf.insert_json5("connect/endpoints", json.dumps([sys.argv[1]]))
 conf.insert_json5("scouting/multicast/enabled", "false")
 with zenoh.open(conf) as session:
-    for reply in session.get("l3p/registry/list", payload=json.dumps({"wire_version": 1, "kind": "core"})):
+    for reply in session.get("l3p/registry/list", payload=json.dumps({"wire_version": 2, "kind": "core"})):
         if reply.ok:
             for a in json.loads(reply.ok.payload.to_string())["artifacts"]:
                 print("artifact", a["name"], a["version"], a["sha256"], ",".join(a["aliases"]))
-    for reply in session.get("l3p/registry/show", payload=json.dumps({"wire_version": 1, "artifact": "a1-core@9"})):
+    for reply in session.get("l3p/registry/show", payload=json.dumps({"wire_version": 2, "artifact": "a1-core@9"})):
         if reply.err:
             e = json.loads(reply.err.payload.to_string())
             print("error", e["code"], e["message"])
-    for reply in session.get("l3p/registry/pull", payload=json.dumps({"wire_version": 1, "artifact": "a1-core@prod"})):
+    for reply in session.get("l3p/registry/pull", payload=json.dumps({"wire_version": 2, "artifact": "a1-core@prod"})):
         if reply.ok:
             meta = json.loads(reply.ok.attachment.to_string())["artifact"]
             print("pulled", meta["name"], meta["version"], reply.ok.payload.to_bytes().decode())

@@ -221,7 +221,7 @@ async fn bad_requests_get_clear_errors_and_the_service_keeps_running() {
     let reply = raw_error(
         &fx.session,
         "show",
-        b"{\"wire_version\": 1, \"artifact\": ".to_vec(),
+        b"{\"wire_version\": 2, \"artifact\": ".to_vec(),
         None,
     )
     .await;
@@ -234,7 +234,7 @@ async fn bad_requests_get_clear_errors_and_the_service_keeps_running() {
     let reply = raw_error(
         &fx.session,
         "show",
-        br#"{"wire_version":1,"artifact":"a1-core@1","x":2}"#.to_vec(),
+        br#"{"wire_version":2,"artifact":"a1-core@1","x":2}"#.to_vec(),
         None,
     )
     .await;
@@ -270,7 +270,7 @@ async fn bad_requests_get_clear_errors_and_the_service_keeps_running() {
     );
 
     // Oversized request and blob.
-    let long = format!(r#"{{"wire_version":1,"artifact":"{}"}}"#, "a".repeat(4000));
+    let long = format!(r#"{{"wire_version":2,"artifact":"{}"}}"#, "a".repeat(4000));
     let reply = raw_error(&fx.session, "show", long.into_bytes(), None).await;
     assert_eq!(reply.code, ErrorCode::TooLarge);
     assert!(

@@ -359,6 +359,8 @@ impl RobotSpec {
                 .penalised_links
                 .len()
                 .min(crate::task::MAX_PENALISED_BODIES),
+            standing_height: model
+                .standing_height(&self.model_order_pose(model, &self.default_pose)),
         }
     }
 

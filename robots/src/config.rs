@@ -361,6 +361,8 @@ pub struct RewardParams {
     /// for its A1): with penalties dominating early, falling fast would otherwise pay. IsaacLab:
     /// false.
     pub only_positive_rewards: bool,
+    /// Target of `base_height_l2` as a fraction of the robot's standing height.
+    pub base_height_fraction: f32,
 }
 
 impl Default for RewardParams {
@@ -371,6 +373,7 @@ impl Default for RewardParams {
             air_time_min_command: 0.1,
             contact_threshold: 1.0,
             only_positive_rewards: false,
+            base_height_fraction: 1.0,
         }
     }
 }
@@ -394,6 +397,12 @@ pub struct RewardScales {
     pub undesired_contacts: f32,
     pub flat_orientation_l2: f32,
     pub dof_pos_limits: f32,
+    /// `(h − fraction · standing)²`, h = base height above the terrain under it.
+    pub base_height_l2: f32,
+    /// 1 while the feet move in diagonal pairs (see `task::trot_contact`), when commanded to move.
+    pub trot_contact: f32,
+    /// Σ |q − q_default| over the hip abduction joints.
+    pub joint_deviation_l1: f32,
 }
 
 impl Default for RewardScales {
@@ -411,6 +420,9 @@ impl Default for RewardScales {
             undesired_contacts: -1.0,
             flat_orientation_l2: 0.0,
             dof_pos_limits: 0.0,
+            base_height_l2: 0.0,
+            trot_contact: 0.0,
+            joint_deviation_l1: 0.0,
         }
     }
 }
@@ -448,6 +460,20 @@ impl RewardScales {
         }
         s
     }
+
+    /// l3p's gait recipe on top of IsaacLab's tables (measured in BENCHMARKS.md "A real trot"):
+    /// IsaacLab's flat A1 learned a crouched, chattering shuffle with its knees on the floor, so
+    /// the base is held near standing height, feet move in diagonal pairs, thighs and calves may
+    /// not touch the ground and hips stay near their default abduction. (A heavier action-rate weight,
+    /// −0.05, made every early step's clipped reward zero at the initial action noise: no signal.)
+    pub fn add_gait_terms(&mut self, family: RobotFamily) {
+        self.base_height_l2 = -20.0;
+        self.trot_contact = 0.5;
+        self.joint_deviation_l1 = -0.1;
+        if family == RobotFamily::Unitree {
+            self.undesired_contacts = -1.0;
+        }
+    }
 }
 
 overrides! {
@@ -464,6 +490,9 @@ overrides! {
         undesired_contacts: f32,
         flat_orientation_l2: f32,
         dof_pos_limits: f32,
+        base_height_l2: f32,
+        trot_contact: f32,
+        joint_deviation_l1: f32,
     }
 }
 
@@ -496,6 +525,17 @@ pub struct RandomizationConfig {
     pub reset_base_velocity: f32,
     /// Reset: joint positions = default × `U(lo, hi)` (IsaacLab `reset_joints_by_scale`).
     pub reset_joint_pos_scale: [f32; 2],
+    /// Passive viscous joint damping (N·m·s/rad), added to the PD's kd; real gearmotors have it.
+    pub joint_damping: [f32; 2],
+    /// Coulomb joint friction (N·m).
+    pub joint_friction: [f32; 2],
+    /// Scale of the motor torque (motor strength).
+    pub motor_strength: [f32; 2],
+    /// Scales of the PD gains kp and kd.
+    pub kp_scale: [f32; 2],
+    pub kd_scale: [f32; 2],
+    /// Delay (s) before new joint targets act, rounded to physics steps.
+    pub latency_s: [f32; 2],
 }
 
 impl Default for RandomizationConfig {
@@ -513,6 +553,12 @@ impl Default for RandomizationConfig {
             reset_yaw: std::f32::consts::PI,
             reset_base_velocity: 0.5,
             reset_joint_pos_scale: [0.5, 1.5],
+            joint_damping: [0.0, 0.0],
+            joint_friction: [0.0, 0.0],
+            motor_strength: [1.0, 1.0],
+            kp_scale: [1.0, 1.0],
+            kd_scale: [1.0, 1.0],
+            latency_s: [0.0, 0.0],
         }
     }
 }
@@ -541,6 +587,29 @@ impl RandomizationConfig {
         }
         r
     }
+
+    /// l3p's robustness ranges on top of IsaacLab's events: what a second simulator and a real
+    /// motor have and IsaacLab's flat tasks leave out (a policy trained without joint damping
+    /// collapsed in MuJoCo with the vendor's 1–2 N·m·s/rad). Damping and friction scale with the
+    /// motor size of the family; ground friction 0.4–1.25; pushes on.
+    pub fn add_actuator_randomization(&mut self, family: RobotFamily) {
+        let (damping, friction) = match family {
+            RobotFamily::Unitree => (2.0, 0.3),
+            RobotFamily::Anymal => (5.0, 0.8),
+            RobotFamily::Spot | RobotFamily::Other => (3.0, 0.5),
+        };
+        self.joint_damping = [0.0, damping];
+        self.joint_friction = [0.0, friction];
+        self.motor_strength = [0.85, 1.15];
+        self.kp_scale = [0.85, 1.15];
+        self.kd_scale = [0.85, 1.15];
+        self.latency_s = [0.0, 0.02];
+        self.static_friction = [0.4, 1.25];
+        self.dynamic_friction = [0.4, 1.0];
+        self.pushes = true;
+        self.push_interval_s = [10.0, 15.0];
+        self.push_velocity_xy = 0.5;
+    }
 }
 
 overrides! {
@@ -557,16 +626,38 @@ overrides! {
         reset_yaw: f32,
         reset_base_velocity: f32,
         reset_joint_pos_scale: [f32; 2],
+        joint_damping: [f32; 2],
+        joint_friction: [f32; 2],
+        motor_strength: [f32; 2],
+        kp_scale: [f32; 2],
+        kd_scale: [f32; 2],
+        latency_s: [f32; 2],
     }
 }
 
 // ---------------------------------------------------------------------------------------------
 // The env section and its resolution
 
+/// Which defaults the reward weights and randomisation start from.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Recipe {
+    /// IsaacLab 2.1's per-robot tables plus l3p's gait terms
+    /// ([`RewardScales::add_gait_terms`]) and actuator randomisation
+    /// ([`RandomizationConfig::add_actuator_randomization`]).
+    #[default]
+    L3p,
+    /// IsaacLab 2.1's per-robot tables alone.
+    Isaaclab,
+}
+
 /// `[env]`: the locomotion task. Default = IsaacLab 2.1 rough velocity task.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct EnvConfig {
+    /// Defaults of reward weights and randomisation: `l3p` (IsaacLab + gait terms + actuator
+    /// randomisation) or `isaaclab`.
+    pub recipe: Recipe,
     /// Physics step (s). IsaacLab: 0.005.
     pub sim_dt: f32,
     /// Physics steps per policy step. IsaacLab: 4 (policy at 50 Hz).
@@ -598,6 +689,7 @@ impl Default for EnvConfig {
             height_scan: true,
             obs_clip: 100.0,
             action_clip: 100.0,
+            recipe: Recipe::L3p,
             terrain: TerrainConfig::default(),
             commands: CommandConfig::default(),
             noise: NoiseConfig::default(),
@@ -621,6 +713,9 @@ height_scan = true
 # Final clip of observations; clip of raw actions (non-finite actions become 0).
 obs_clip = 100.0
 action_clip = 100.0
+# Defaults of [rewards] and [randomization]: "l3p" (IsaacLab's per-robot tables plus l3p's gait
+# terms and actuator randomisation) or "isaaclab" (the tables alone).
+recipe = "l3p"
 
 [terrain]
 # flat | simple-rough | curriculum | paper
@@ -681,6 +776,8 @@ air_time_threshold = 0.5
 air_time_min_command = 0.1
 contact_threshold = 1.0
 only_positive_rewards = false
+# base_height_l2 target: this fraction of the robot's standing height.
+base_height_fraction = 1.0
 
 # Weights default to the robot's IsaacLab table (RewardScales::for_robot); set a key to override it.
 [rewards]
@@ -695,6 +792,10 @@ only_positive_rewards = false
 # undesired_contacts = -1.0
 # flat_orientation_l2 = 0.0
 # dof_pos_limits = 0.0
+# l3p's gait terms (RewardScales::add_gait_terms):
+# base_height_l2 = -20.0
+# trot_contact = 0.5
+# joint_deviation_l1 = -0.1
 
 # Randomisation defaults to the robot's IsaacLab events (RandomizationConfig::for_robot).
 [randomization]
@@ -709,6 +810,13 @@ only_positive_rewards = false
 # reset_yaw = 3.1415927
 # reset_base_velocity = 0.5
 # reset_joint_pos_scale = [0.5, 1.5]
+# l3p's actuator and joint randomisation (RandomizationConfig::add_actuator_randomization):
+# joint_damping = [0.0, 2.0]
+# joint_friction = [0.0, 0.3]
+# motor_strength = [0.85, 1.15]
+# kp_scale = [0.85, 1.15]
+# kd_scale = [0.85, 1.15]
+# latency_s = [0.0, 0.02]
 "#;
 
 /// Number of proprioceptive observations.
@@ -789,6 +897,9 @@ impl EnvConfig {
     /// Reward weights for `robot`: the IsaacLab table, then `[env.rewards]` overrides.
     pub fn reward_scales(&self, robot: &str) -> RewardScales {
         let mut s = RewardScales::for_robot(robot, self.is_rough());
+        if self.recipe == Recipe::L3p {
+            s.add_gait_terms(RobotFamily::from_name(robot));
+        }
         self.rewards.apply(&mut s);
         s
     }
@@ -796,6 +907,9 @@ impl EnvConfig {
     /// Randomisation for `robot`: the IsaacLab table, then `[env.randomization]` overrides.
     pub fn randomization(&self, robot: &str) -> RandomizationConfig {
         let mut r = RandomizationConfig::for_robot(robot);
+        if self.recipe == Recipe::L3p {
+            r.add_actuator_randomization(RobotFamily::from_name(robot));
+        }
         self.randomization.apply(&mut r);
         r
     }
@@ -888,6 +1002,26 @@ impl EnvConfig {
             "randomization.reset_joint_pos_scale",
             rz.reset_joint_pos_scale,
         )?;
+        for (key, r) in [
+            ("randomization.joint_damping", rz.joint_damping),
+            ("randomization.joint_friction", rz.joint_friction),
+            ("randomization.latency_s", rz.latency_s),
+        ] {
+            check_range(key, r)?;
+            check_nonneg(key, r[0])?;
+        }
+        for (key, r) in [
+            ("randomization.motor_strength", rz.motor_strength),
+            ("randomization.kp_scale", rz.kp_scale),
+            ("randomization.kd_scale", rz.kd_scale),
+        ] {
+            check_range(key, r)?;
+            check_pos(key, r[0])?;
+        }
+        check_pos(
+            "reward_params.base_height_fraction",
+            self.reward_params.base_height_fraction,
+        )?;
         let terrain = self.terrain.resolve(robot)?;
         let step_dt = self.sim_dt * self.decimation as f32;
         // IsaacLab: math.ceil(episode_length_s / step_dt) in doubles; 0.005f32 * 4 is slightly below
@@ -923,7 +1057,7 @@ impl EnvConfig {
 
 impl RewardScales {
     /// `(name, weight)` pairs in [`crate::task::RewardTerm`] order.
-    pub fn named(&self) -> [(&'static str, f32); 11] {
+    pub fn named(&self) -> [(&'static str, f32); crate::task::NUM_REWARD_TERMS] {
         [
             ("track_lin_vel_xy_exp", self.track_lin_vel_xy_exp),
             ("track_ang_vel_z_exp", self.track_ang_vel_z_exp),
@@ -936,6 +1070,9 @@ impl RewardScales {
             ("undesired_contacts", self.undesired_contacts),
             ("flat_orientation_l2", self.flat_orientation_l2),
             ("dof_pos_limits", self.dof_pos_limits),
+            ("base_height_l2", self.base_height_l2),
+            ("trot_contact", self.trot_contact),
+            ("joint_deviation_l1", self.joint_deviation_l1),
         ]
     }
 }
@@ -946,7 +1083,11 @@ mod tests {
 
     #[test]
     fn default_is_isaaclab_rough_task() {
-        let spec = EnvConfig::default().resolve("anymal_c").unwrap();
+        let isaaclab = EnvConfig {
+            recipe: Recipe::Isaaclab,
+            ..EnvConfig::default()
+        };
+        let spec = isaaclab.resolve("anymal_c").unwrap();
         assert_eq!(spec.max_episode_steps, 1000);
         assert!((spec.step_dt - 0.02).abs() < 1e-7);
         assert_eq!(spec.obs_dim, 235);
@@ -958,6 +1099,21 @@ mod tests {
         assert!(spec.terrain.curriculum);
         assert!(spec.randomization.pushes);
         assert_eq!(spec.randomization.push_interval_s, [10.0, 15.0]);
+        // The l3p recipe adds its gait terms and actuator ranges on top, nothing else.
+        let l3p = EnvConfig::default().resolve("a1").unwrap();
+        let mut expected = RewardScales::for_robot("a1", true);
+        expected.base_height_l2 = -20.0;
+        expected.trot_contact = 0.5;
+        expected.joint_deviation_l1 = -0.1;
+        expected.undesired_contacts = -1.0;
+        assert_eq!(l3p.rewards, expected);
+        assert_eq!(l3p.randomization.joint_damping, [0.0, 2.0]);
+        assert_eq!(l3p.randomization.latency_s, [0.0, 0.02]);
+        assert_eq!(l3p.randomization.static_friction, [0.4, 1.25]);
+        assert!(l3p.randomization.pushes);
+        let anymal = EnvConfig::default().resolve("anymal_b").unwrap();
+        assert_eq!(anymal.randomization.joint_damping, [0.0, 5.0]);
+        assert_eq!(anymal.rewards.undesired_contacts, -1.0);
     }
 
     #[test]

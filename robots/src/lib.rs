@@ -16,12 +16,14 @@
 //! - [`sim::SimWorld`]: `new(SimConfig)`, `add_flat_ground`, `add_heightfield_ground`, `add_robot(model,
 //!   binding, actuator, pose, q) -> index`, `set_targets`, `step` (one physics step, PD inside),
 //!   `clear_contact_maxima`, `read_state(i, &mut task::RobotState)`, `reset_robot`, `push_base`,
-//!   `set_friction`, `set_added_base_mass`. [`actuator::Actuator`] / [`actuator::dc_motor_clip`].
+//!   `set_friction`, `set_base_randomization`, `set_joint_dynamics`. [`actuator::Actuator`] / [`actuator::dc_motor_clip`].
 //! - [`vecenv::VecEnv`]: `VecEnv::new(&spec, &EnvConfig, num_envs, threads, seed)?`, `obs_dim()`,
 //!   `action_dim()`, `reset_all() -> &[f32]` (`[N * obs_dim]`), `step(&actions)? -> StepOutput { obs,
 //!   rewards, terminated, truncated, episodes: &[EpisodeInfo] }`, `timings() -> StageTimings`
 //!   (physics, observations, rewards, resets), `nan_resets()`, `curriculum()` (mean level, per type),
 //!   `robot_state(e)`. Observations of reset envs are those of the new episode (legged_gym order).
+//! - [`gait::GaitMeter`] → [`gait::GaitReport`], [`gait::WalkCriterion`]: gait diagnostics and the
+//!   walk criterion of `l3p eval` / `l3p bench walk`.
 //! - [`bench::run_sim_bench`], [`bench::stand_check`]: the work behind `l3p bench sim` and
 //!   `l3p robots check`.
 //!
@@ -31,6 +33,7 @@ pub mod actuator;
 pub mod bench;
 pub mod catalog;
 pub mod config;
+pub mod gait;
 pub mod model;
 pub mod sim;
 pub mod task;

@@ -131,6 +131,35 @@ struct JointSlot {
     axis_local: Vec3,
 }
 
+/// Per-robot actuator and joint imperfections (domain randomisation; real motors have them).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JointDynamics {
+    /// Passive viscous joint damping added to the PD's kd (N·m·s/rad).
+    pub damping: f32,
+    /// Coulomb joint friction (N·m) opposing the joint velocity. Applied implicitly, as extra joint
+    /// damping `friction / max(|q̇|, 0.05 rad/s)` (an explicit ±friction torque chatters at 5 ms
+    /// on light legs): exactly `friction` above 0.05 rad/s, viscous below.
+    pub friction: f32,
+    /// Scale of the motor torque after clipping (motor strength).
+    pub strength: f32,
+    /// Control latency in physics steps: new targets take effect this many steps late.
+    pub latency_steps: u32,
+}
+
+impl Default for JointDynamics {
+    fn default() -> Self {
+        JointDynamics {
+            damping: 0.0,
+            friction: 0.0,
+            strength: 1.0,
+            latency_steps: 0,
+        }
+    }
+}
+
+/// Joint velocity (rad/s) below which Coulomb friction turns viscous (see [`JointDynamics::friction`]).
+const FRICTION_SMOOTHING_VEL: f32 = 0.05;
+
 struct RobotInstance {
     bodies: Vec<RigidBodyHandle>,
     root: RigidBodyHandle,
@@ -141,6 +170,11 @@ struct RobotInstance {
     termination: Vec<ColliderHandle>,
     actuator: Actuator,
     targets: [f32; NUM_JOINTS],
+    /// Targets before the last `set_targets` (applied during the latency).
+    prev_targets: [f32; NUM_JOINTS],
+    /// Physics steps since the last `set_targets`.
+    steps_since_targets: u32,
+    dynamics: JointDynamics,
     torque: [f32; NUM_JOINTS],
     /// Contact maxima over the current control step.
     foot_force: [f32; NUM_FEET],
@@ -148,6 +182,8 @@ struct RobotInstance {
     base_force: f32,
     base_mass: f32,
     base_com: Vec3,
+    /// The model's base mass properties (randomisation starts from these).
+    base_mprops: MassProperties,
 }
 
 /// A rapier world with robots and ground.
@@ -488,12 +524,20 @@ impl SimWorld {
             termination,
             actuator,
             targets: *q,
+            prev_targets: *q,
+            steps_since_targets: 0,
+            dynamics: JointDynamics::default(),
             torque: [0.0; NUM_JOINTS],
             foot_force: [0.0; NUM_FEET],
             penalised_force: [0.0; MAX_PENALISED_BODIES],
             base_force: 0.0,
             base_mass: model.bodies[0].mass,
             base_com: model.bodies[0].com,
+            base_mprops: mass_props(
+                model.bodies[0].mass,
+                model.bodies[0].com,
+                model.bodies[0].inertia,
+            ),
         };
         self.robots.push(inst);
         let id = self.robots.len() - 1;
@@ -522,8 +566,9 @@ impl SimWorld {
                 ActuatorMode::ImplicitSpring => (r.actuator.kp[k], r.actuator.kd[k]),
                 ActuatorMode::ExplicitTorque => (0.0, 0.0),
             };
+            // Passive damping is physical in both modes: it always goes to the implicit damping.
             if let Some(d) = mb.damping_mut().get_mut(j.dof) {
-                *d = kd;
+                *d = kd + r.dynamics.damping;
             }
             if let Some(link) = mb.link_mut(j.link_id) {
                 link.joint.set_spring(3, kp, r.targets[k]);
@@ -531,29 +576,46 @@ impl SimWorld {
         }
     }
 
-    /// Sets joint position targets (canonical order) for the next steps.
+    /// Sets joint position targets (canonical order) for the next steps; with a latency they take
+    /// effect `latency_steps` physics steps later.
     pub fn set_targets(&mut self, robot: usize, q_target: &[f32; NUM_JOINTS]) {
         if let Some(r) = self.robots.get_mut(robot) {
+            r.prev_targets = r.targets;
             r.targets = *q_target;
+            r.steps_since_targets = 0;
         }
     }
 
-    /// Adds mass (kg) to a robot's base (domain randomisation), keeping its inertia scaled.
-    pub fn set_added_base_mass(&mut self, robot: usize, added: f32) {
+    /// Sets a robot's joint damping, friction, motor strength and latency.
+    pub fn set_joint_dynamics(&mut self, robot: usize, dynamics: JointDynamics) {
+        if let Some(r) = self.robots.get_mut(robot) {
+            r.dynamics = dynamics;
+            self.apply_gains(robot);
+        }
+    }
+
+    /// A robot's joint dynamics.
+    pub fn joint_dynamics(&self, robot: usize) -> Option<JointDynamics> {
+        self.robots.get(robot).map(|r| r.dynamics)
+    }
+
+    /// Base mass and centre of mass for domain randomisation: `added` kg on the model's base mass
+    /// (inertia scaled with it, mass kept ≥ 10% of the model's) and the CoM shifted by `com_offset`
+    /// (base frame, m). Always computed from the model's values, so repeated calls do not compound.
+    pub fn set_base_randomization(&mut self, robot: usize, added: f32, com_offset: [f32; 3]) {
         let Some(r) = self.robots.get(robot) else {
             return;
         };
         let mass = (r.base_mass + added).max(0.1 * r.base_mass);
-        let com = r.base_com;
+        let scale = mass / r.base_mass.max(1e-6);
+        let com = r.base_com + Vec3::from(com_offset);
+        let nominal = r.base_mprops;
         if let Some(rb) = self.world.bodies.get_mut(r.root) {
-            let scale = mass / r.base_mass.max(1e-6);
-            let mp = rb.mass_properties().local_mprops;
-            let p = mp.principal_inertia() * scale;
             let new = MassProperties::with_principal_inertia_frame(
                 com,
                 mass,
-                p,
-                mp.principal_inertia_local_frame,
+                nominal.principal_inertia() * scale,
+                nominal.principal_inertia_local_frame,
             );
             rb.set_additional_mass_properties(new, true);
         }
@@ -585,17 +647,40 @@ impl SimWorld {
             let Some(mb) = self.world.multibody_joints.get_multibody_mut(r.mb) else {
                 continue;
             };
+            let delayed = r.steps_since_targets < r.dynamics.latency_steps;
+            r.steps_since_targets = r.steps_since_targets.saturating_add(1);
+            let dynamics = r.dynamics;
             for (k, j) in r.joints.iter().enumerate() {
                 let q = mb
                     .link(j.link_id)
                     .map(|l| l.joint().coords()[3])
                     .unwrap_or(0.0);
                 let qd = mb.generalized_velocity().get(j.dof).copied().unwrap_or(0.0);
-                let tau = r.actuator.torque(k, r.targets[k], q, qd);
+                let target = if delayed {
+                    r.prev_targets[k]
+                } else {
+                    r.targets[k]
+                };
+                let tau = dynamics.strength * r.actuator.torque(k, target, q, qd);
                 r.torque[k] = tau;
+                // Passive damping and Coulomb friction act at the joint, not through the motor
+                // (they are not in `torque`); both go into rapier's implicit joint damping.
+                let friction_damping = if dynamics.friction > 0.0 {
+                    dynamics.friction / qd.abs().max(FRICTION_SMOOTHING_VEL)
+                } else {
+                    0.0
+                };
+                let pd_damping = match mode {
+                    ActuatorMode::ImplicitSpring => r.actuator.kd[k],
+                    ActuatorMode::ExplicitTorque => 0.0,
+                };
+                if let Some(d) = mb.damping_mut().get_mut(j.dof) {
+                    *d = pd_damping + dynamics.damping + friction_damping;
+                }
                 if mode == ActuatorMode::ImplicitSpring {
                     let kp = r.actuator.kp[k];
                     if kp > 0.0 {
+                        // The spring applies kp (rest − q) − kd q̇; the passive terms are extra damping.
                         let rest = q + (tau + r.actuator.kd[k] * qd) / kp;
                         if let Some(link) = mb.link_mut(j.link_id) {
                             link.joint.set_spring(3, kp, rest);
@@ -710,6 +795,8 @@ impl SimWorld {
             return;
         };
         r.targets = *q;
+        r.prev_targets = *q;
+        r.steps_since_targets = u32::MAX;
         r.torque = [0.0; NUM_JOINTS];
         r.foot_force = [0.0; NUM_FEET];
         r.penalised_force = [0.0; MAX_PENALISED_BODIES];

@@ -198,6 +198,9 @@ pub struct RobotTaskParams {
     pub action_scale: f32,
     /// How many entries of [`RobotState::penalised_force`] are used.
     pub num_penalised_bodies: usize,
+    /// Base height above the ground in the default pose with the feet on the ground (m): the
+    /// target of `base_height_l2`.
+    pub standing_height: f32,
 }
 
 impl RobotTaskParams {
@@ -281,10 +284,13 @@ pub enum RewardTerm {
     UndesiredContacts,
     FlatOrientationL2,
     DofPosLimits,
+    BaseHeightL2,
+    TrotContact,
+    JointDeviationL1,
 }
 
 /// Number of reward terms.
-pub const NUM_REWARD_TERMS: usize = 11;
+pub const NUM_REWARD_TERMS: usize = 14;
 
 impl RewardTerm {
     /// All terms in order.
@@ -300,6 +306,9 @@ impl RewardTerm {
         RewardTerm::UndesiredContacts,
         RewardTerm::FlatOrientationL2,
         RewardTerm::DofPosLimits,
+        RewardTerm::BaseHeightL2,
+        RewardTerm::TrotContact,
+        RewardTerm::JointDeviationL1,
     ];
 
     /// IsaacLab term name (also the `[env.rewards]` key).
@@ -316,6 +325,9 @@ impl RewardTerm {
             RewardTerm::UndesiredContacts => "undesired_contacts",
             RewardTerm::FlatOrientationL2 => "flat_orientation_l2",
             RewardTerm::DofPosLimits => "dof_pos_limits",
+            RewardTerm::BaseHeightL2 => "base_height_l2",
+            RewardTerm::TrotContact => "trot_contact",
+            RewardTerm::JointDeviationL1 => "joint_deviation_l1",
         }
     }
 }
@@ -390,6 +402,20 @@ pub struct EpisodeSummary {
     pub reason: DoneReason,
 }
 
+/// 1 when the feet move in diagonal pairs — FL with RR, FR with RL, the two pairs in opposite
+/// phases (one pair on the ground, the other in the air) — else 0. A trot without a clock: the
+/// policy needs no phase input, so the observation layout stays the deployable 48.
+pub fn trot_contact(foot_force: &[f32; NUM_FEET], threshold: f32) -> f32 {
+    let c = foot_force.map(|f| f > threshold);
+    let diagonal_a = c[0] == c[3];
+    let diagonal_b = c[1] == c[2];
+    if diagonal_a && diagonal_b && c[0] != c[1] {
+        1.0
+    } else {
+        0.0
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Per-env state
 
@@ -457,6 +483,17 @@ pub struct BodyRandomization {
     pub added_base_mass: f32,
     /// Base centre-of-mass shift (m, base frame).
     pub base_com_offset: [f32; 3],
+    /// Passive joint damping (N·m·s/rad).
+    pub joint_damping: f32,
+    /// Coulomb joint friction (N·m).
+    pub joint_friction: f32,
+    /// Motor torque scale.
+    pub motor_strength: f32,
+    /// PD gain scales.
+    pub kp_scale: f32,
+    pub kd_scale: f32,
+    /// Action latency (s).
+    pub latency_s: f32,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -669,7 +706,8 @@ impl Task {
         }
     }
 
-    /// Friction, added base mass and CoM shift for one env (draw once per env).
+    /// Friction, added base mass, CoM shift and joint/actuator dynamics for one env (drawn at
+    /// start-up and again at every reset).
     pub fn sample_body_randomization<R: Rng + ?Sized>(&self, rng: &mut R) -> BodyRandomization {
         let r = &self.spec.randomization;
         let static_friction = uniform(rng, r.static_friction);
@@ -682,6 +720,12 @@ impl Task {
             dynamic_friction,
             added_base_mass,
             base_com_offset,
+            joint_damping: uniform(rng, r.joint_damping),
+            joint_friction: uniform(rng, r.joint_friction),
+            motor_strength: uniform(rng, r.motor_strength),
+            kp_scale: uniform(rng, r.kp_scale),
+            kd_scale: uniform(rng, r.kd_scale),
+            latency_s: uniform(rng, r.latency_s),
         }
     }
 
@@ -789,6 +833,19 @@ impl Task {
             .filter(|f| **f > p.contact_threshold)
             .count() as f32;
         raw[RewardTerm::FlatOrientationL2 as usize] = g[0] * g[0] + g[1] * g[1];
+        let height = state.base_pos[2] - terrain.height_at(state.base_pos[0], state.base_pos[1]);
+        let dh = height - p.base_height_fraction * self.robot.standing_height;
+        raw[RewardTerm::BaseHeightL2 as usize] = dh * dh;
+        if cmd.xy_norm() > p.air_time_min_command || cmd.wz.abs() > p.air_time_min_command {
+            raw[RewardTerm::TrotContact as usize] =
+                trot_contact(&state.foot_force, p.contact_threshold);
+        }
+        let mut deviation = 0.0;
+        for j in (0..NUM_JOINTS).step_by(3) {
+            // Hip abduction joints (canonical order: abduction, flexion, knee per leg).
+            deviation += (state.joint_pos[j] - self.robot.default_joint_pos[j]).abs();
+        }
+        raw[RewardTerm::JointDeviationL1 as usize] = deviation;
 
         let mut total = 0.0;
         for k in 0..NUM_REWARD_TERMS {
@@ -956,11 +1013,16 @@ mod tests {
             soft_limit_factor: 0.9,
             action_scale: 0.25,
             num_penalised_bodies: 8,
+            standing_height: 0.3,
         }
     }
 
+    /// IsaacLab's recipe: the tests below check its semantics term by term.
     fn flat_task(robot: &str) -> (Task, Terrain) {
-        let mut cfg = EnvConfig::default();
+        let mut cfg = EnvConfig {
+            recipe: crate::config::Recipe::Isaaclab,
+            ..EnvConfig::default()
+        };
         cfg.terrain.preset = TerrainPreset::Flat;
         let spec = cfg.resolve(robot).unwrap();
         let terrain = Terrain::generate(&spec.terrain).unwrap();
@@ -1166,6 +1228,96 @@ mod tests {
         let clipped = task.evaluate(&mut env, &st, &action, &terrain);
         assert_eq!(clipped.reward, 0.0);
         assert_eq!(clipped.terms, r.terms);
+    }
+
+    #[test]
+    fn gait_terms_match_hand_computation() {
+        let mut cfg = EnvConfig::default(); // the l3p recipe
+        cfg.terrain.preset = TerrainPreset::Flat;
+        let spec = cfg.resolve("a1").unwrap();
+        let terrain = Terrain::generate(&spec.terrain).unwrap();
+        let task = Task::new(spec, a1_params()).unwrap();
+        let w = task.spec.rewards.clone();
+        assert_eq!(
+            (w.base_height_l2, w.trot_contact, w.joint_deviation_l1),
+            (-20.0, 0.5, -0.1)
+        );
+        let dt = 0.02;
+        let mut rng = StdRng::seed_from_u64(3);
+        let mut st = standing_state();
+        let mut env = TaskEnvState::new();
+        task.reset_env(&mut env, &st, [0.0; 3], &mut rng);
+        env.command = Command {
+            vx: 0.5,
+            time_left: 10.0,
+            ..Default::default()
+        };
+        // Crouched at 0.18 m (standing 0.30): (0.18 − 0.30)² = 0.0144.
+        st.base_pos[2] = 0.18;
+        // Trot pattern: FL + RR down, FR + RL up.
+        st.foot_force = [40.0, 0.0, 0.0, 40.0];
+        // Hip abduction 0.3 rad off default on FL, −0.2 on RR: Σ|Δ| = 0.5 (thigh offsets ignored).
+        st.joint_pos = A1_DEFAULT;
+        st.joint_pos[0] += 0.3;
+        st.joint_pos[9] -= 0.2;
+        st.joint_pos[1] += 1.0;
+        let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
+        let t = |k: RewardTerm| r.terms[k as usize];
+        assert!((t(RewardTerm::BaseHeightL2) - (-20.0 * 0.0144 * dt)).abs() < 1e-6);
+        assert!((t(RewardTerm::TrotContact) - 0.5 * dt).abs() < 1e-7);
+        assert!((t(RewardTerm::JointDeviationL1) - (-0.1 * 0.5 * dt)).abs() < 1e-6);
+        // Pace (left pair together) and all-down are not a trot; standing still earns nothing.
+        assert_eq!(trot_contact(&[40.0, 0.0, 40.0, 0.0], 1.0), 0.0);
+        assert_eq!(trot_contact(&[40.0; 4], 1.0), 0.0);
+        assert_eq!(trot_contact(&[0.0, 40.0, 40.0, 0.0], 1.0), 1.0);
+        env.command.vx = 0.0;
+        let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
+        assert_eq!(r.terms[RewardTerm::TrotContact as usize], 0.0);
+    }
+
+    #[test]
+    fn actuator_randomisation_honours_its_ranges_and_pins() {
+        let mut cfg = EnvConfig::default();
+        cfg.terrain.preset = TerrainPreset::Flat;
+        let task = Task::new(cfg.resolve("a1").unwrap(), a1_params()).unwrap();
+        let mut rng = StdRng::seed_from_u64(9);
+        let draws: Vec<BodyRandomization> = (0..2000)
+            .map(|_| task.sample_body_randomization(&mut rng))
+            .collect();
+        let range = |f: fn(&BodyRandomization) -> f32| {
+            let lo = draws.iter().map(f).fold(f32::INFINITY, f32::min);
+            let hi = draws.iter().map(f).fold(f32::NEG_INFINITY, f32::max);
+            (lo, hi)
+        };
+        // Inside the configured ranges and spread over them (not pinned at one end).
+        for (name, (lo, hi), want) in [
+            ("joint_damping", range(|b| b.joint_damping), [0.0, 2.0]),
+            ("joint_friction", range(|b| b.joint_friction), [0.0, 0.3]),
+            ("motor_strength", range(|b| b.motor_strength), [0.85, 1.15]),
+            ("kp_scale", range(|b| b.kp_scale), [0.85, 1.15]),
+            ("kd_scale", range(|b| b.kd_scale), [0.85, 1.15]),
+            ("latency_s", range(|b| b.latency_s), [0.0, 0.02]),
+            ("static_friction", range(|b| b.static_friction), [0.4, 1.25]),
+        ] {
+            let span = want[1] - want[0];
+            assert!(
+                lo >= want[0] && hi <= want[1],
+                "{name}: [{lo}, {hi}] outside {want:?}"
+            );
+            assert!(
+                lo < want[0] + 0.05 * span && hi > want[1] - 0.05 * span,
+                "{name}: [{lo}, {hi}]"
+            );
+        }
+        assert!(
+            draws
+                .iter()
+                .all(|b| b.dynamic_friction <= b.static_friction)
+        );
+        // A pin (what `l3p eval --joint-damping 2` writes) gives that value every time.
+        cfg.randomization.joint_damping = Some([2.0, 2.0]);
+        let task = Task::new(cfg.resolve("a1").unwrap(), a1_params()).unwrap();
+        assert!((0..100).all(|_| task.sample_body_randomization(&mut rng).joint_damping == 2.0));
     }
 
     #[test]

@@ -20,9 +20,12 @@ use rayon::prelude::*;
 use crate::actuator::Actuator;
 use crate::catalog::{NUM_JOINTS, RobotSpec};
 use crate::config::{ConfigError, EnvConfig};
+use crate::gait::{GaitMeter, GaitReport, GaitSample};
 use crate::model::RobotModel;
-use crate::sim::{RobotBinding, SimConfig, SimWorld};
-use crate::task::{DoneReason, RobotState, StepResult, Task, TaskEnvState, TaskError};
+use crate::sim::{JointDynamics, RobotBinding, SimConfig, SimWorld};
+use crate::task::{
+    DoneReason, NUM_REWARD_TERMS, RobotState, StepResult, Task, TaskEnvState, TaskError,
+};
 use crate::terrain::{Curriculum, Terrain, TerrainError, TerrainType};
 use crate::urdf::UrdfError;
 
@@ -88,6 +91,8 @@ pub struct EpisodeInfo {
     pub ang_vel_error: f32,
     /// Why it ended.
     pub reason: DoneReason,
+    /// Per reward term (weighted, × dt), summed over the episode, [`crate::task::RewardTerm`] order.
+    pub terms: [f32; NUM_REWARD_TERMS],
 }
 
 /// Accumulated wall time per stage (summed over steps; per worker stages are averaged over
@@ -136,6 +141,8 @@ struct Worker {
     obs: Vec<f32>,
     rng: SmallRng,
     nan_resets: u64,
+    /// Gait meters, one per env (empty unless [`VecEnv::enable_gait_meter`]).
+    gait: Vec<GaitMeter>,
     t_physics: Duration,
     t_obs: Duration,
     t_rewards: Duration,
@@ -292,6 +299,7 @@ impl VecEnv {
                         .wrapping_mul(0x9E37_79B9_7F4A_7C15),
                 ),
                 nan_resets: 0,
+                gait: Vec::new(),
                 t_physics: Duration::ZERO,
                 t_obs: Duration::ZERO,
                 t_rewards: Duration::ZERO,
@@ -301,11 +309,7 @@ impl VecEnv {
         }
         for w in &mut workers {
             for i in 0..w.n {
-                let r = shared.task.sample_body_randomization(&mut w.rng);
-                w.sim.set_friction(i, r.static_friction);
-                if r.added_base_mass != 0.0 {
-                    w.sim.set_added_base_mass(i, r.added_base_mass);
-                }
+                randomize_body(&shared, w, i);
             }
         }
         Ok(Self {
@@ -384,6 +388,26 @@ impl VecEnv {
             .map(|w| &w.states[e - w.first_env])
     }
 
+    /// Starts measuring gait diagnostics (see [`crate::gait`]) on every env from the next step;
+    /// clears earlier measurements.
+    pub fn enable_gait_meter(&mut self) {
+        for w in &mut self.workers {
+            w.gait = vec![GaitMeter::new(); w.n];
+        }
+    }
+
+    /// The gait diagnostics measured since [`VecEnv::enable_gait_meter`] (finished episodes and
+    /// running ones), against the robot's standing height.
+    pub fn gait_report(&self) -> GaitReport {
+        let mut all = GaitMeter::new();
+        for w in &self.workers {
+            for g in &w.gait {
+                all.merge(g);
+            }
+        }
+        all.report(self.shared.task.robot.standing_height)
+    }
+
     /// Resets every env and returns the first observations `[num_envs * obs_dim]`.
     pub fn reset_all(&mut self) -> &[f32] {
         let shared = &self.shared;
@@ -446,6 +470,7 @@ impl VecEnv {
                         lin_vel_error: s.mean_lin_vel_error,
                         ang_vel_error: s.mean_ang_vel_error,
                         reason: s.reason,
+                        terms: s.terms,
                     });
                     self.curriculum.update(
                         e,
@@ -586,11 +611,50 @@ fn physics_and_rewards(shared: &Shared, w: &mut Worker, actions: &[f32]) {
         if w.results[i].reason == DoneReason::NonFinite {
             w.nan_resets += 1;
         }
+        if let Some(meter) = w.gait.get_mut(i) {
+            let s = &w.states[i];
+            meter.record(&GaitSample {
+                state: s,
+                targets: &w.targets[i],
+                ground_height: shared.terrain.height_at(s.base_pos[0], s.base_pos[1]),
+                num_penalised: shared.task.robot.num_penalised_bodies,
+                contact_threshold: shared.task.spec.reward_params.contact_threshold,
+                dt: shared.task.spec.step_dt,
+            });
+            if w.results[i].done() {
+                meter.end_episode();
+            }
+        }
     }
     w.t_rewards += t.elapsed();
 }
 
+/// Draws and applies one env's physical randomisation (at start-up and at every reset, so that
+/// every episode meets new friction, mass, damping, gains and latency).
+fn randomize_body(shared: &Shared, w: &mut Worker, i: usize) {
+    let r = shared.task.sample_body_randomization(&mut w.rng);
+    w.sim.set_friction(i, r.static_friction);
+    w.sim
+        .set_base_randomization(i, r.added_base_mass, r.base_com_offset);
+    let mut actuator = shared.actuator;
+    for k in 0..NUM_JOINTS {
+        actuator.kp[k] *= r.kp_scale;
+        actuator.kd[k] *= r.kd_scale;
+    }
+    w.sim.set_actuator(i, actuator);
+    w.sim.set_joint_dynamics(
+        i,
+        JointDynamics {
+            damping: r.joint_damping,
+            friction: r.joint_friction,
+            strength: r.motor_strength,
+            latency_steps: (r.latency_s / shared.sim_cfg.dt).round() as u32,
+        },
+    );
+}
+
 fn reset_one(shared: &Shared, w: &mut Worker, i: usize) {
+    randomize_body(shared, w, i);
     let s = shared
         .task
         .sample_reset(w.origins[i], &shared.terrain, &mut w.rng);

@@ -2,7 +2,7 @@
 
 use l3p_robots::actuator::Actuator;
 use l3p_robots::catalog::{Gains, RobotSpec};
-use l3p_robots::sim::{ActuatorMode, RobotBinding, SimConfig, SimWorld};
+use l3p_robots::sim::{ActuatorMode, JointDynamics, RobotBinding, SimConfig, SimWorld};
 use l3p_robots::task::{RobotState, projected_gravity};
 use rapier3d::math::{Pose, Vec3};
 
@@ -198,4 +198,142 @@ fn heightfield_ground_is_z_up_with_rows_along_y() {
             h + 0.05
         );
     }
+}
+
+/// A1 hanging in the air (no ground, gravity off) with one hip flexion joint commanded 0.5 rad away:
+/// returns that joint's position after each physics step.
+fn swing(dynamics: JointDynamics, steps: usize) -> Vec<f32> {
+    let spec = RobotSpec::by_name("a1").unwrap();
+    let model = spec.model().unwrap();
+    let mut w = SimWorld::new(SimConfig {
+        gravity: 0.0,
+        ..SimConfig::default()
+    });
+    let id = w
+        .add_robot(
+            &model,
+            &RobotBinding::from_spec(spec),
+            Actuator::from_spec(spec, spec.training_gains),
+            Pose::from_translation(Vec3::new(0.0, 0.0, 1.0)),
+            &spec.default_pose,
+        )
+        .unwrap();
+    w.set_joint_dynamics(id, dynamics);
+    let mut target = spec.default_pose;
+    target[1] += 0.5;
+    w.set_targets(id, &target);
+    let mut s = RobotState::default();
+    (0..steps)
+        .map(|_| {
+            w.step();
+            w.read_state(id, &mut s);
+            s.joint_pos[1] - spec.default_pose[1]
+        })
+        .collect()
+}
+
+#[test]
+fn joint_dynamics_damp_delay_and_hold_as_configured() {
+    let free = swing(JointDynamics::default(), 40);
+    assert!(
+        free[0] > 1e-4,
+        "the joint starts moving at once: {}",
+        free[0]
+    );
+    // Latency: 4 physics steps (20 ms) with the old target, then the same motion as without it.
+    let delayed = swing(
+        JointDynamics {
+            latency_steps: 4,
+            ..Default::default()
+        },
+        40,
+    );
+    assert!(
+        delayed[..4].iter().all(|q| q.abs() < 1e-5),
+        "{:?}",
+        &delayed[..4]
+    );
+    assert!(delayed[6] > 1e-4);
+    // Passive damping slows the approach to the target.
+    let damped = swing(
+        JointDynamics {
+            damping: 2.0,
+            ..Default::default()
+        },
+        40,
+    );
+    assert!(
+        damped[10] < 0.8 * free[10],
+        "damped {} vs free {}",
+        damped[10],
+        free[10]
+    );
+    // Coulomb friction above the PD torque (25 N·m/rad × 0.5 rad = 12.5 N·m) all but stops the joint
+    // (below 0.05 rad/s it acts as 400 N·m·s/rad of damping: it creeps at ~0.03 rad/s).
+    let stuck = swing(
+        JointDynamics {
+            friction: 20.0,
+            ..Default::default()
+        },
+        40,
+    );
+    assert!(
+        stuck[39].abs() < 0.02 * 0.5,
+        "friction should stop it: {}",
+        stuck[39]
+    );
+    // A weaker motor moves it more slowly.
+    let weak = swing(
+        JointDynamics {
+            strength: 0.5,
+            ..Default::default()
+        },
+        40,
+    );
+    assert!(weak[5] < free[5], "weak {} vs free {}", weak[5], free[5]);
+}
+
+#[test]
+fn repeated_mass_randomisation_does_not_compound() {
+    let spec = RobotSpec::by_name("a1").unwrap();
+    let cfg = SimConfig::default();
+    let run = |calls: usize| {
+        let model = spec.model().unwrap();
+        let h = spec.nominal_standing_height().unwrap();
+        let mut w = SimWorld::new(cfg);
+        w.add_flat_ground(0.0);
+        let id = w
+            .add_robot(
+                &model,
+                &RobotBinding::from_spec(spec),
+                Actuator::from_spec(spec, spec.stand_gains),
+                Pose::from_translation(Vec3::new(0.0, 0.0, h + 0.02)),
+                &spec.default_pose,
+            )
+            .unwrap();
+        for _ in 0..calls {
+            w.set_base_randomization(id, 3.0, [0.02, 0.0, 0.0]);
+        }
+        w.set_targets(id, &spec.default_pose);
+        let mut s = RobotState::default();
+        for _ in 0..200 {
+            w.clear_contact_maxima();
+            w.step();
+        }
+        w.read_state(id, &mut s);
+        s.foot_force.iter().sum::<f32>()
+    };
+    // Feet carry (m + 3 kg)·g either way: the tenth call is not ten times the mass.
+    let once = run(1);
+    let ten = run(10);
+    assert!(
+        (once - ten).abs() < 0.02 * once,
+        "once {once} N, ten times {ten} N"
+    );
+    let total = spec.model().unwrap().total_mass() + 3.0;
+    assert!(
+        (once - total * 9.81).abs() < 0.15 * total * 9.81,
+        "{once} N vs {}",
+        total * 9.81
+    );
 }

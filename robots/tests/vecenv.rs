@@ -46,7 +46,12 @@ fn flat_env_steps_with_zero_actions_and_robots_stand() {
 #[test]
 fn rough_env_with_random_and_nan_actions_never_panics() {
     let spec = RobotSpec::by_name("a1").unwrap();
-    let mut env = VecEnv::new(spec, &cfg(TerrainPreset::Curriculum), 6, 2, 7).unwrap();
+    // IsaacLab's recipe: without l3p's joint damping, random actions topple the robots within 6 s.
+    let rough = EnvConfig {
+        recipe: l3p_robots::config::Recipe::Isaaclab,
+        ..cfg(TerrainPreset::Curriculum)
+    };
+    let mut env = VecEnv::new(spec, &rough, 6, 2, 7).unwrap();
     assert_eq!(env.obs_dim(), 235);
     env.reset_all();
     let mut x: u32 = 12345;
@@ -69,4 +74,52 @@ fn rough_env_with_random_and_nan_actions_never_panics() {
     let t = env.timings();
     assert_eq!(t.steps, 300);
     assert!(t.physics > t.rewards);
+}
+
+#[test]
+fn gait_meter_sees_standing_and_chatter_in_the_real_env() {
+    let spec = RobotSpec::by_name("a1").unwrap();
+    let mut env = VecEnv::new(spec, &cfg(TerrainPreset::Flat), 4, 1, 3).unwrap();
+    env.reset_all();
+    // Robots spawn 5 cm above standing height: let them land before measuring.
+    for _ in 0..25 {
+        env.step(&[0.0; 4 * 12]).unwrap();
+    }
+    env.enable_gait_meter();
+    for _ in 0..100 {
+        env.step(&[0.0; 4 * 12]).unwrap();
+    }
+    let standing = env.gait_report();
+    assert_eq!(standing.steps, 400);
+    assert!(
+        (80.0..115.0).contains(&standing.base_height_pct),
+        "standing at {}%",
+        standing.base_height_pct
+    );
+    assert!(
+        standing.swing_share.iter().all(|s| *s < 0.01),
+        "{:?}",
+        standing.swing_share
+    );
+    assert_eq!(standing.non_foot_contact_share, 0.0);
+    assert!(standing.target_change_rms < 1e-6);
+    // Uniform ±2 actions, independent per step: Δa has variance 2·4²/12, so the target change is
+    // action_scale · sqrt(8/3) = 0.25 · 1.633 ≈ 0.41 rad RMS.
+    env.enable_gait_meter();
+    let mut x: u32 = 99;
+    let mut actions = vec![0.0f32; 4 * 12];
+    for _ in 0..200 {
+        for a in actions.iter_mut() {
+            x = x.wrapping_mul(1664525).wrapping_add(1013904223);
+            *a = (x >> 8) as f32 / (1u32 << 24) as f32 * 4.0 - 2.0;
+        }
+        env.step(&actions).unwrap();
+    }
+    let chatter = env.gait_report();
+    assert!(
+        (chatter.target_change_rms - 0.408).abs() < 0.04,
+        "{}",
+        chatter.target_change_rms
+    );
+    assert!(chatter.mean_power > standing.mean_power);
 }

@@ -1,0 +1,462 @@
+//! Gait diagnostics: is a policy walking, or shuffling on its knees? [`GaitMeter`] accumulates, per
+//! env and control step, what a locomotion engineer looks at; [`GaitReport`] is the result and
+//! [`WalkCriterion`] the pass/fail rule that `l3p eval` and `l3p bench walk` apply.
+//!
+//! Measures (all from the simulator snapshot [`RobotState`] and the joint targets sent):
+//! - base height above the ground under the base (mean, min);
+//! - per foot: swing share (steps without contact) and touchdowns per second;
+//! - share of steps in which any non-foot body (penalised links or the base) touches the ground;
+//! - joint-target change per control step, RMS over joints and steps (rad): the chatter measure;
+//! - mean |τ| (N·m) and mean mechanical power Σ|τ·q̇| (W);
+//! - per episode, the heading change (rad, unwrapped), meaningful with a zero yaw command;
+//! - tracking errors and falls come from the episode statistics (`EpisodeSummary`).
+
+use serde::{Deserialize, Serialize};
+
+use crate::task::{MAX_PENALISED_BODIES, NUM_FEET, NUM_JOINTS, RobotState, wrap_to_pi, yaw_of};
+
+/// One control step of one env, as the meter sees it.
+#[derive(Debug, Clone, Copy)]
+pub struct GaitSample<'a> {
+    pub state: &'a RobotState,
+    /// Joint position targets sent for this step (rad).
+    pub targets: &'a [f32; NUM_JOINTS],
+    /// Terrain height under the base (m).
+    pub ground_height: f32,
+    /// How many entries of `state.penalised_force` are real bodies.
+    pub num_penalised: usize,
+    /// Force (N) above which a body is in contact.
+    pub contact_threshold: f32,
+    /// Control period (s).
+    pub dt: f32,
+}
+
+/// Running sums for one env (merge several with [`GaitMeter::merge`]).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GaitMeter {
+    steps: u64,
+    height_sum: f64,
+    height_min: f32,
+    swing_steps: [u64; NUM_FEET],
+    touchdowns: [u64; NUM_FEET],
+    non_foot_contact_steps: u64,
+    target_change_sq_sum: f64,
+    target_change_steps: u64,
+    abs_torque_sum: f64,
+    power_sum: f64,
+    // per-episode state
+    prev_targets: Option<[f32; NUM_JOINTS]>,
+    prev_contact: Option<[bool; NUM_FEET]>,
+    prev_yaw: Option<f32>,
+    episode_heading_change: f32,
+    // finished episodes
+    heading_changes: Vec<f32>,
+    episode_seconds: f64,
+}
+
+impl GaitMeter {
+    /// An empty meter.
+    pub fn new() -> Self {
+        GaitMeter {
+            height_min: f32::INFINITY,
+            ..Default::default()
+        }
+    }
+
+    /// Adds one control step.
+    pub fn record(&mut self, s: &GaitSample<'_>) {
+        let st = s.state;
+        if !st.is_finite() {
+            return;
+        }
+        self.steps += 1;
+        let h = st.base_pos[2] - s.ground_height;
+        self.height_sum += h as f64;
+        self.height_min = self.height_min.min(h);
+        let mut contact = [false; NUM_FEET];
+        for f in 0..NUM_FEET {
+            contact[f] = st.foot_force[f] > s.contact_threshold;
+            if !contact[f] {
+                self.swing_steps[f] += 1;
+            }
+        }
+        if let Some(prev) = self.prev_contact {
+            for f in 0..NUM_FEET {
+                if contact[f] && !prev[f] {
+                    self.touchdowns[f] += 1;
+                }
+            }
+        }
+        self.prev_contact = Some(contact);
+        let n_pen = s.num_penalised.min(MAX_PENALISED_BODIES);
+        if st.base_force > s.contact_threshold
+            || st.penalised_force[..n_pen]
+                .iter()
+                .any(|f| *f > s.contact_threshold)
+        {
+            self.non_foot_contact_steps += 1;
+        }
+        if let Some(prev) = self.prev_targets {
+            let sq: f32 = (0..NUM_JOINTS)
+                .map(|j| (s.targets[j] - prev[j]).powi(2))
+                .sum();
+            self.target_change_sq_sum += (sq / NUM_JOINTS as f32) as f64;
+            self.target_change_steps += 1;
+        }
+        self.prev_targets = Some(*s.targets);
+        let (mut tau, mut power) = (0.0f32, 0.0f32);
+        for j in 0..NUM_JOINTS {
+            tau += st.joint_torque[j].abs();
+            power += (st.joint_torque[j] * st.joint_vel[j]).abs();
+        }
+        self.abs_torque_sum += (tau / NUM_JOINTS as f32) as f64;
+        self.power_sum += power as f64;
+        let yaw = yaw_of(st.base_quat);
+        if let Some(prev) = self.prev_yaw {
+            self.episode_heading_change += wrap_to_pi(yaw - prev);
+        }
+        self.prev_yaw = Some(yaw);
+        self.episode_seconds += s.dt as f64;
+    }
+
+    /// Ends the current episode (call on termination or time-out, before the next episode's first
+    /// step): its heading change is kept, per-episode state cleared.
+    pub fn end_episode(&mut self) {
+        if self.prev_yaw.is_some() {
+            self.heading_changes.push(self.episode_heading_change);
+        }
+        self.prev_targets = None;
+        self.prev_contact = None;
+        self.prev_yaw = None;
+        self.episode_heading_change = 0.0;
+    }
+
+    /// Adds another meter's finished sums (per-episode state of `other` is ignored).
+    pub fn merge(&mut self, other: &GaitMeter) {
+        self.steps += other.steps;
+        self.height_sum += other.height_sum;
+        self.height_min = self.height_min.min(other.height_min);
+        for f in 0..NUM_FEET {
+            self.swing_steps[f] += other.swing_steps[f];
+            self.touchdowns[f] += other.touchdowns[f];
+        }
+        self.non_foot_contact_steps += other.non_foot_contact_steps;
+        self.target_change_sq_sum += other.target_change_sq_sum;
+        self.target_change_steps += other.target_change_steps;
+        self.abs_torque_sum += other.abs_torque_sum;
+        self.power_sum += other.power_sum;
+        self.heading_changes
+            .extend_from_slice(&other.heading_changes);
+        self.episode_seconds += other.episode_seconds;
+    }
+
+    /// Control steps recorded.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// The diagnostics; `standing_height` is the robot's nominal standing base height (m).
+    pub fn report(&self, standing_height: f32) -> GaitReport {
+        let n = self.steps.max(1) as f64;
+        let mean_h = (self.height_sum / n) as f32;
+        let mut swing = [0.0; NUM_FEET];
+        let mut touchdown_hz = [0.0; NUM_FEET];
+        let secs = self.episode_seconds.max(1e-9);
+        for f in 0..NUM_FEET {
+            swing[f] = (self.swing_steps[f] as f64 / n) as f32;
+            touchdown_hz[f] = (self.touchdowns[f] as f64 / secs) as f32;
+        }
+        let drift = if self.heading_changes.is_empty() {
+            0.0
+        } else {
+            self.heading_changes.iter().map(|d| d.abs()).sum::<f32>()
+                / self.heading_changes.len() as f32
+        };
+        GaitReport {
+            steps: self.steps,
+            base_height_mean: mean_h,
+            base_height_min: if self.steps > 0 { self.height_min } else { 0.0 },
+            base_height_pct: 100.0 * mean_h / standing_height.max(1e-6),
+            standing_height,
+            swing_share: swing,
+            touchdown_hz,
+            non_foot_contact_share: (self.non_foot_contact_steps as f64 / n) as f32,
+            target_change_rms: (self.target_change_sq_sum / self.target_change_steps.max(1) as f64)
+                .sqrt() as f32,
+            mean_abs_torque: (self.abs_torque_sum / n) as f32,
+            mean_power: (self.power_sum / n) as f32,
+            heading_drift_rad: drift,
+        }
+    }
+}
+
+/// Gait diagnostics of an evaluation (see the module doc for each measure).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GaitReport {
+    pub steps: u64,
+    /// Mean base height above the ground (m).
+    pub base_height_mean: f32,
+    /// Lowest base height seen (m).
+    pub base_height_min: f32,
+    /// Mean base height as % of the standing height.
+    pub base_height_pct: f32,
+    /// The robot's nominal standing height (m).
+    pub standing_height: f32,
+    /// Share of steps each foot (FL, FR, RL, RR) is off the ground.
+    pub swing_share: [f32; NUM_FEET],
+    /// Touchdowns per second per foot.
+    pub touchdown_hz: [f32; NUM_FEET],
+    /// Share of steps with any non-foot body on the ground.
+    pub non_foot_contact_share: f32,
+    /// RMS joint-target change per control step (rad).
+    pub target_change_rms: f32,
+    /// Mean |τ| over joints (N·m).
+    pub mean_abs_torque: f32,
+    /// Mean Σ|τ·q̇| (W).
+    pub mean_power: f32,
+    /// Mean |heading change| over an episode (rad).
+    pub heading_drift_rad: f32,
+}
+
+/// The walk criterion (issue "A real trot"): every bound must hold.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct WalkCriterion {
+    pub max_lin_vel_error: f32,
+    pub max_yaw_rate_error: f32,
+    pub max_fall_fraction: f32,
+    /// Base height, % of standing.
+    pub min_base_height_pct: f32,
+    pub swing_share: [f32; 2],
+    pub max_non_foot_contact_share: f32,
+    /// RMS joint-target change per step (rad).
+    pub max_target_change_rms: f32,
+}
+
+impl Default for WalkCriterion {
+    fn default() -> Self {
+        WalkCriterion {
+            max_lin_vel_error: 0.2,
+            max_yaw_rate_error: 0.3,
+            max_fall_fraction: 0.05,
+            min_base_height_pct: 80.0,
+            swing_share: [0.2, 0.6],
+            max_non_foot_contact_share: 0.02,
+            max_target_change_rms: 0.08,
+        }
+    }
+}
+
+/// The tracking half of an evaluation, next to its [`GaitReport`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct TrackingSummary {
+    pub lin_vel_error: f32,
+    pub yaw_rate_error: f32,
+    pub fall_fraction: f32,
+}
+
+impl WalkCriterion {
+    /// The bounds that fail, as readable lines (empty: it walks).
+    pub fn failures(&self, t: &TrackingSummary, g: &GaitReport) -> Vec<String> {
+        let mut out = Vec::new();
+        if !at_most(t.lin_vel_error, self.max_lin_vel_error) {
+            out.push(format!(
+                "xy tracking error {:.3} > {:.3} m/s",
+                t.lin_vel_error, self.max_lin_vel_error
+            ));
+        }
+        if !at_most(t.yaw_rate_error, self.max_yaw_rate_error) {
+            out.push(format!(
+                "yaw-rate error {:.3} > {:.3} rad/s",
+                t.yaw_rate_error, self.max_yaw_rate_error
+            ));
+        }
+        if !below(t.fall_fraction, self.max_fall_fraction) {
+            out.push(format!(
+                "falls {:.1}% >= {:.1}%",
+                100.0 * t.fall_fraction,
+                100.0 * self.max_fall_fraction
+            ));
+        }
+        if !at_most(self.min_base_height_pct, g.base_height_pct) {
+            out.push(format!(
+                "base height {:.0}% < {:.0}% of standing",
+                g.base_height_pct, self.min_base_height_pct
+            ));
+        }
+        for (f, s) in g.swing_share.iter().enumerate() {
+            if !(at_most(self.swing_share[0], *s) && at_most(*s, self.swing_share[1])) {
+                out.push(format!(
+                    "foot {} swings {:.0}% of steps (want {:.0}-{:.0}%)",
+                    FOOT_NAMES[f],
+                    100.0 * s,
+                    100.0 * self.swing_share[0],
+                    100.0 * self.swing_share[1]
+                ));
+            }
+        }
+        if !below(g.non_foot_contact_share, self.max_non_foot_contact_share) {
+            out.push(format!(
+                "non-foot ground contact in {:.1}% of steps (want < {:.1}%)",
+                100.0 * g.non_foot_contact_share,
+                100.0 * self.max_non_foot_contact_share
+            ));
+        }
+        if !at_most(g.target_change_rms, self.max_target_change_rms) {
+            out.push(format!(
+                "joint-target change {:.3} rad RMS per step > {:.3}",
+                g.target_change_rms, self.max_target_change_rms
+            ));
+        }
+        out
+    }
+}
+
+/// `a <= b`, false for NaN (a NaN measurement fails its bound).
+fn at_most(a: f32, b: f32) -> bool {
+    a <= b
+}
+
+/// `a < b`, false for NaN.
+fn below(a: f32, b: f32) -> bool {
+    a < b
+}
+
+/// Canonical foot order.
+pub const FOOT_NAMES: [&str; NUM_FEET] = ["FL", "FR", "RL", "RR"];
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::task::quat_from_yaw;
+
+    fn sample<'a>(state: &'a RobotState, targets: &'a [f32; NUM_JOINTS]) -> GaitSample<'a> {
+        GaitSample {
+            state,
+            targets,
+            ground_height: 0.0,
+            num_penalised: 8,
+            contact_threshold: 1.0,
+            dt: 0.02,
+        }
+    }
+
+    /// A trot: diagonal pairs (FL+RR, FR+RL) alternate every 10 steps; targets change smoothly.
+    #[test]
+    fn known_trot_pattern_gives_known_swing_share_and_touchdowns() {
+        let mut meter = GaitMeter::new();
+        let mut state = RobotState::default();
+        state.base_pos[2] = 0.27;
+        for step in 0..200 {
+            let phase_a = (step / 10) % 2 == 0;
+            state.foot_force = if phase_a {
+                [50.0, 0.0, 0.0, 50.0]
+            } else {
+                [0.0, 50.0, 50.0, 0.0]
+            };
+            let targets = [0.01 * step as f32; NUM_JOINTS];
+            meter.record(&sample(&state, &targets));
+        }
+        meter.end_episode();
+        let r = meter.report(0.30);
+        assert_eq!(r.steps, 200);
+        for s in r.swing_share {
+            assert!((s - 0.5).abs() < 1e-6, "swing {s}");
+        }
+        // 10 touchdowns per foot over 4 s (the first step's contact is not a touchdown).
+        for (f, hz) in r.touchdown_hz.iter().enumerate() {
+            let expected = if f == 0 || f == 3 { 9.0 } else { 10.0 } / 4.0;
+            assert!((hz - expected).abs() < 1e-4, "foot {f}: {hz} vs {expected}");
+        }
+        assert!((r.target_change_rms - 0.01).abs() < 1e-5);
+        assert!((r.base_height_pct - 90.0).abs() < 1e-3);
+        assert_eq!(r.non_foot_contact_share, 0.0);
+    }
+
+    /// Chatter: targets flip ±0.1 rad every step → RMS change 0.2 rad; knees down half the time.
+    #[test]
+    fn known_chatter_and_knee_contact() {
+        let mut meter = GaitMeter::new();
+        let mut state = RobotState::default();
+        state.base_pos[2] = 0.13;
+        state.foot_force = [30.0; NUM_FEET];
+        for step in 0..100 {
+            let sign = if step % 2 == 0 { 1.0 } else { -1.0 };
+            state.penalised_force[5] = if step % 2 == 0 { 5.0 } else { 0.0 };
+            state.joint_torque = [2.0; NUM_JOINTS];
+            state.joint_vel = [-1.5; NUM_JOINTS];
+            meter.record(&sample(&state, &[0.1 * sign; NUM_JOINTS]));
+        }
+        let r = meter.report(0.30);
+        assert!((r.target_change_rms - 0.2).abs() < 1e-5);
+        assert!((r.non_foot_contact_share - 0.5).abs() < 1e-6);
+        assert_eq!(r.swing_share, [0.0; NUM_FEET]);
+        assert!((r.mean_abs_torque - 2.0).abs() < 1e-6);
+        assert!((r.mean_power - 36.0).abs() < 1e-4);
+        assert!((r.base_height_min - 0.13).abs() < 1e-6);
+        let fails = WalkCriterion::default().failures(
+            &TrackingSummary {
+                lin_vel_error: 0.1,
+                yaw_rate_error: 0.1,
+                fall_fraction: 0.0,
+            },
+            &r,
+        );
+        assert_eq!(fails.len(), 1 + 4 + 1 + 1, "{fails:#?}");
+    }
+
+    #[test]
+    fn heading_drift_unwraps_across_pi_and_is_per_episode() {
+        let mut meter = GaitMeter::new();
+        let mut state = RobotState::default();
+        // Turns 0.05 rad per step for 100 steps (5 rad: crosses ±π) in episode one…
+        for k in 0..=100 {
+            state.base_quat = quat_from_yaw(wrap_to_pi(0.05 * k as f32));
+            meter.record(&sample(&state, &[0.0; NUM_JOINTS]));
+        }
+        meter.end_episode();
+        // …and −1 rad in episode two, merged from another env.
+        let mut other = GaitMeter::new();
+        for k in 0..=10 {
+            state.base_quat = quat_from_yaw(-0.1 * k as f32);
+            other.record(&sample(&state, &[0.0; NUM_JOINTS]));
+        }
+        other.end_episode();
+        meter.merge(&other);
+        let r = meter.report(0.3);
+        assert!(
+            (r.heading_drift_rad - 3.0).abs() < 1e-3,
+            "{}",
+            r.heading_drift_rad
+        );
+    }
+
+    #[test]
+    fn a_clean_walk_passes_the_criterion() {
+        let g = GaitReport {
+            steps: 1000,
+            base_height_mean: 0.28,
+            base_height_min: 0.25,
+            base_height_pct: 93.0,
+            standing_height: 0.30,
+            swing_share: [0.4; NUM_FEET],
+            touchdown_hz: [2.0; NUM_FEET],
+            non_foot_contact_share: 0.0,
+            target_change_rms: 0.03,
+            mean_abs_torque: 3.0,
+            mean_power: 40.0,
+            heading_drift_rad: 0.1,
+        };
+        let t = TrackingSummary {
+            lin_vel_error: 0.1,
+            yaw_rate_error: 0.2,
+            fall_fraction: 0.0,
+        };
+        assert!(WalkCriterion::default().failures(&t, &g).is_empty());
+        let t_nan = TrackingSummary {
+            lin_vel_error: f32::NAN,
+            ..t
+        };
+        assert_eq!(WalkCriterion::default().failures(&t_nan, &g).len(), 1);
+    }
+}
