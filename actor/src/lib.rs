@@ -51,6 +51,9 @@ pub trait RolloutEnv: Send + 'static {
     fn mean_base_height(&self) -> Option<f32> {
         None
     }
+    /// The policy's mean actions behind the next `step`'s sampled actions (smoothness penalties
+    /// use them, where the env supports it).
+    fn set_action_means(&mut self, _means: &[f32]) {}
     /// Names of the reward terms each finished episode reports (`EpisodeStats::reward_terms`).
     fn reward_term_names(&self) -> Vec<String> {
         Vec::new()
@@ -143,6 +146,10 @@ impl RolloutEnv for SimEnv {
             .map(|s| s.base_pos[2] - terrain.height_at(s.base_pos[0], s.base_pos[1]))
             .sum();
         (n > 0).then(|| sum / n as f32)
+    }
+    fn set_action_means(&mut self, means: &[f32]) {
+        // A length mismatch is a bug in the caller; the step then penalises the sampled actions.
+        let _ = self.env.set_action_means(means);
     }
     fn reward_term_names(&self) -> Vec<String> {
         l3p_robots::task::RewardTerm::ALL
@@ -237,6 +244,7 @@ impl<E: RolloutEnv> Collector<E> {
             }
             let rows = t * n..(t + 1) * n;
             chunk.log_probs[rows.clone()].copy_from_slice(&log_probs);
+            self.env.set_action_means(&self.means);
             self.env.step(
                 &actions,
                 &mut chunk.rewards[rows.clone()],
@@ -251,6 +259,15 @@ impl<E: RolloutEnv> Collector<E> {
         chunk.collect_seconds = start.elapsed().as_secs_f32();
         self.inference_seconds = inference.as_secs_f64();
         self.stage_seconds = self.env.take_stage_seconds();
+        chunk.stage_seconds.clear();
+        chunk
+            .stage_seconds
+            .push(("inference".into(), self.inference_seconds as f32));
+        chunk.stage_seconds.extend(
+            self.stage_seconds
+                .iter()
+                .map(|(name, s)| (name.to_string(), *s as f32)),
+        );
         Ok(())
     }
 }

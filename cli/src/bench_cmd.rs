@@ -25,6 +25,23 @@ pub enum BenchCommand {
     /// in-process `sim-robot` over loopback Zenoh, against a bare deadline loop (no work) as the
     /// baseline measured in the same run.
     Deploy(DeployBenchArgs),
+    /// End-to-end training throughput: `l3p train <config>` for a few iterations in a scratch data
+    /// directory, then samples/s and the split of an iteration (physics, inference, observations,
+    /// rewards, resets, transport, update), medians after a warm-up.
+    Train(TrainBenchArgs),
+}
+
+/// `l3p bench train` arguments.
+#[derive(Debug, Args)]
+pub struct TrainBenchArgs {
+    /// The training config to measure.
+    #[arg(default_value = "configs/a1-flat.toml")]
+    pub config: std::path::PathBuf,
+    /// Iterations to run (the first `warmup` are not counted).
+    #[arg(long, default_value_t = 20)]
+    pub iterations: u64,
+    #[arg(long, default_value_t = 5)]
+    pub warmup: u64,
 }
 
 /// `l3p bench deploy` arguments.
@@ -114,7 +131,84 @@ pub fn run(args: BenchArgs) -> anyhow::Result<()> {
         BenchCommand::Sim(a) => sim(a),
         BenchCommand::Learner(a) => learner(a),
         BenchCommand::Deploy(a) => deploy(a),
+        BenchCommand::Train(a) => train(a),
     }
+}
+
+fn train(a: TrainBenchArgs) -> anyhow::Result<()> {
+    if a.iterations <= a.warmup {
+        anyhow::bail!(
+            "--iterations {} must exceed --warmup {}",
+            a.iterations,
+            a.warmup
+        );
+    }
+    let scratch = std::env::temp_dir().join(format!("l3p-bench-train-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&scratch);
+    let result = bench_train_in(&a, &scratch);
+    let _ = std::fs::remove_dir_all(&scratch);
+    result
+}
+
+fn bench_train_in(a: &TrainBenchArgs, scratch: &std::path::Path) -> anyhow::Result<()> {
+    crate::train_cmd::run(crate::train_cmd::TrainArgs {
+        config: a.config.clone(),
+        run: Some("bench".into()),
+        iterations: Some(a.iterations),
+        envs: None,
+        data_dir: Some(scratch.to_path_buf()),
+        quiet: true,
+        until_walks: false,
+        eval_every: 25,
+    })?;
+    let text = std::fs::read_to_string(l3p_learner::daemon::metrics_path(&scratch.join("bench")))?;
+    let records: Vec<l3p_proto::MetricsRecord> = text
+        .lines()
+        .filter_map(|l| l3p_proto::codec::decode_json(l.as_bytes()).ok())
+        .filter(|r: &l3p_proto::MetricsRecord| r.iteration > a.warmup)
+        .collect();
+    if records.is_empty() {
+        anyhow::bail!("no iterations after the warm-up were recorded");
+    }
+    let median = |key: &str| -> f64 {
+        let mut v: Vec<f64> = records
+            .iter()
+            .filter_map(|r| r.values.get(key).copied())
+            .collect();
+        v.sort_by(f64::total_cmp);
+        if v.is_empty() {
+            f64::NAN
+        } else {
+            v[v.len() / 2]
+        }
+    };
+    let iteration = median("iteration_seconds");
+    println!(
+        "bench train: {} ({} iterations after {} warm-up, medians)",
+        a.config.display(),
+        records.len(),
+        a.warmup
+    );
+    println!(
+        "  end to end        {:>9.0} samples/s  ({:.0} samples in {:.3} s per iteration)",
+        median("samples_per_second"),
+        median("samples"),
+        iteration
+    );
+    let rows = [
+        ("collect (actor)", median("collect_seconds")),
+        ("  physics", median("time/physics_seconds")),
+        ("  inference", median("time/inference_seconds")),
+        ("  observations", median("time/observations_seconds")),
+        ("  rewards", median("time/rewards_seconds")),
+        ("  resets", median("time/resets_seconds")),
+        ("update (learner)", median("update_seconds")),
+        ("transport share", median("transport_share") * iteration),
+    ];
+    for (name, s) in rows {
+        println!("  {name:<18}{s:>9.3} s  {:>5.1}%", 100.0 * s / iteration);
+    }
+    Ok(())
 }
 
 fn learner(a: LearnerBenchArgs) -> anyhow::Result<()> {

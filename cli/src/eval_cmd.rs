@@ -366,6 +366,10 @@ pub fn format_rows(rows: &[EvalRow]) -> String {
             col(&|r| gait(r, &|g| format!("{:.3} rad", g.target_change_rms))),
         ),
         (
+            "  second difference RMS",
+            col(&|r| gait(r, &|g| format!("{:.3} rad", g.target_second_diff_rms))),
+        ),
+        (
             "mean |torque|",
             col(&|r| gait(r, &|g| format!("{:.2} N·m", g.mean_abs_torque))),
         ),

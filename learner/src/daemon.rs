@@ -637,6 +637,17 @@ pub async fn run(
         let mut record = MetricsRecord::new(&run, "learner", new_version, unix_ms());
         update_metrics(&mut record, &update);
         record.insert_episode_means(chunks.iter().flat_map(|c| c.episodes.iter()));
+        // The slowest actor's split of its collection time, per stage.
+        let mut stages: std::collections::BTreeMap<&str, f32> = Default::default();
+        for c in &chunks {
+            for (name, s) in &c.stage_seconds {
+                let slot = stages.entry(name.as_str()).or_default();
+                *slot = slot.max(*s);
+            }
+        }
+        for (name, s) in stages {
+            record.insert(&format!("time/{name}_seconds"), s as f64);
+        }
         record.insert_reward_term_means(
             chunks
                 .iter()

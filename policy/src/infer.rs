@@ -34,6 +34,7 @@ use std::path::Path;
 
 use rand::Rng;
 use rand_distr::StandardNormal;
+use rayon::prelude::*;
 use safetensors::SafeTensors;
 use serde::{Deserialize, Serialize};
 
@@ -225,8 +226,9 @@ impl DeployPolicy {
     }
 
     /// Action means for `n = obs.len() / obs_dim` observations (row-major), written into `out`
-    /// (`[n, action_dim]`, resized). Allocation-free after the first call with the same `n` when
-    /// the same `scratch` is reused.
+    /// (`[n, action_dim]`, resized). Batches of 128 rows or more are split over the rayon pool in
+    /// blocks of 64 rows (each block allocates its buffers); smaller ones run on this thread,
+    /// allocation-free after the first call with the same `n` when the same `scratch` is reused.
     pub fn act_into(
         &self,
         obs: &[f32],
@@ -241,15 +243,32 @@ impl DeployPolicy {
             )));
         }
         let n = obs.len() / d;
+        let a = self.config.action_dim;
+        out.clear();
+        out.resize(n * a, 0.0);
+        if n < 2 * PARALLEL_ROWS || rayon::current_num_threads() < 2 {
+            self.forward_rows(obs, n, out, scratch);
+            return Ok(());
+        }
+        // Rows are independent: each block runs the whole network on its own thread (the actors'
+        // batch of 512 observations took ~20% of collection time on one core).
+        obs.par_chunks(PARALLEL_ROWS * d)
+            .zip(out.par_chunks_mut(PARALLEL_ROWS * a))
+            .for_each_init(InferScratch::default, |scratch, (x, y)| {
+                self.forward_rows(x, x.len() / d, y, scratch);
+            });
+        Ok(())
+    }
+
+    /// The network on `n` rows of `obs`, into `out` (`[n, action_dim]`, already sized).
+    fn forward_rows(&self, obs: &[f32], n: usize, out: &mut [f32], scratch: &mut InferScratch) {
         scratch.a.clear();
         scratch.a.extend_from_slice(obs);
         for layer in &self.layers {
             dense_forward(layer, &scratch.a, n, &mut scratch.b);
             std::mem::swap(&mut scratch.a, &mut scratch.b);
         }
-        out.clear();
-        out.extend_from_slice(&scratch.a);
-        Ok(())
+        out.copy_from_slice(&scratch.a);
     }
 
     /// Action means (allocating convenience form of [`act_into`](Self::act_into)).
@@ -280,6 +299,9 @@ impl DeployPolicy {
         (actions, logp)
     }
 }
+
+/// Rows per parallel block of [`DeployPolicy::act_into`] (batches below twice this run serially).
+const PARALLEL_ROWS: usize = 64;
 
 /// Reusable buffers of [`DeployPolicy::act_into`].
 #[derive(Debug, Default, Clone)]

@@ -347,3 +347,24 @@ fn bad_exports_are_errors() {
     );
     assert!(export_bytes(&model, "spot").is_err());
 }
+
+/// A large batch runs in parallel row blocks; every row must equal the same row run alone.
+#[test]
+fn parallel_batch_inference_equals_row_by_row() {
+    let d = cpu_device();
+    let model = PolicyModel::new(small(), vec![RobotSpec::new("go1", 6, 3)], &d).unwrap();
+    let (bytes, _) = export_bytes(&model, "go1").unwrap();
+    let p = DeployPolicy::from_bytes(&bytes).unwrap();
+    let n = 301; // not a multiple of the block size
+    let obs: Vec<f32> = (0..n * 6).map(|i| (i as f32 * 0.37).sin() * 2.0).collect();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(2)
+        .build()
+        .unwrap();
+    let batch = pool.install(|| p.act(&obs).unwrap());
+    assert_eq!(batch.len(), n * 3);
+    for r in [0, 1, 63, 64, 127, 128, 200, 300] {
+        let alone = p.act(&obs[r * 6..(r + 1) * 6]).unwrap();
+        assert_eq!(&batch[r * 3..(r + 1) * 3], alone.as_slice(), "row {r}");
+    }
+}

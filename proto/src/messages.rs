@@ -84,7 +84,13 @@ pub struct RolloutChunk {
     /// Seconds the actor spent on the wire for this chunk: fetching its policy's weights plus
     /// encoding and sending its previous chunk.
     pub transport_seconds: f32,
+    /// Where `collect_seconds` went, by stage (`physics`, `inference`, `observations`, `rewards`,
+    /// `resets`, ...; seconds, at most [`MAX_STAGES`] entries).
+    pub stage_seconds: Vec<(String, f32)>,
 }
+
+/// Most entries of [`RolloutChunk::stage_seconds`].
+pub const MAX_STAGES: usize = 16;
 wire_message!(RolloutChunk, "rollout chunk");
 
 impl RolloutChunk {
@@ -124,6 +130,7 @@ impl RolloutChunk {
             episodes: Vec::new(),
             collect_seconds: 0.0,
             transport_seconds: 0.0,
+            stage_seconds: Vec::new(),
         }
     }
 

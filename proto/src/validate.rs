@@ -172,6 +172,28 @@ impl RolloutChunk {
                 value: self.action_stds[index],
             });
         }
+        if self.stage_seconds.len() > crate::messages::MAX_STAGES {
+            return Err(ValidationError::Mismatch {
+                what: W,
+                field: "stage_seconds",
+                expected: format!("at most {} stages", crate::messages::MAX_STAGES),
+                got: self.stage_seconds.len().to_string(),
+            });
+        }
+        if let Some((name, v)) = self
+            .stage_seconds
+            .iter()
+            .find(|(n, v)| !valid_term_name(n) || !v.is_finite() || *v < 0.0)
+        {
+            return Err(ValidationError::Mismatch {
+                what: W,
+                field: "stage_seconds",
+                expected:
+                    "names of 1-64 ASCII letters, digits or '_' with finite, non-negative seconds"
+                        .into(),
+                got: format!("{name:?} = {v}"),
+            });
+        }
         if self.reward_terms.len() > crate::messages::MAX_REWARD_TERMS {
             return Err(ValidationError::Mismatch {
                 what: W,
@@ -180,11 +202,7 @@ impl RolloutChunk {
                 got: self.reward_terms.len().to_string(),
             });
         }
-        if let Some(index) = self.reward_terms.iter().position(|n| {
-            n.is_empty()
-                || n.len() > 64
-                || !n.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
-        }) {
+        if let Some(index) = self.reward_terms.iter().position(|n| !valid_term_name(n)) {
             return Err(ValidationError::Mismatch {
                 what: W,
                 field: "reward_terms",
@@ -317,4 +335,11 @@ impl RobotCommand {
         }
         Ok(())
     }
+}
+
+/// A reward-term or stage name: 1-64 ASCII letters, digits or `_`.
+fn valid_term_name(name: &str) -> bool {
+    !name.is_empty()
+        && name.len() <= 64
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_')
 }

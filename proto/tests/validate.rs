@@ -173,4 +173,19 @@ fn episode_means_average_and_split_by_terrain_type() {
     chunk.episodes[1].reward_terms = vec![0.0, 0.0];
     chunk.reward_terms[0] = "bad name/with slash".into();
     assert!(chunk.validate().is_err());
+    chunk.reward_terms[0] = "tracking".into();
+    chunk.stage_seconds = vec![("physics".into(), 1.5), ("inference".into(), 0.2)];
+    chunk.validate().unwrap();
+    chunk.stage_seconds[1].1 = f32::NAN;
+    assert!(
+        chunk
+            .validate()
+            .unwrap_err()
+            .to_string()
+            .contains("stage_seconds")
+    );
+    chunk.stage_seconds[1].1 = -1.0;
+    assert!(chunk.validate().is_err());
+    chunk.stage_seconds = vec![("x".into(), 0.0); 17];
+    assert!(chunk.validate().is_err());
 }

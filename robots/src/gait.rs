@@ -42,10 +42,13 @@ pub struct GaitMeter {
     non_foot_contact_steps: u64,
     target_change_sq_sum: f64,
     target_change_steps: u64,
+    target_second_diff_sq_sum: f64,
+    target_second_diff_steps: u64,
     abs_torque_sum: f64,
     power_sum: f64,
     // per-episode state
     prev_targets: Option<[f32; NUM_JOINTS]>,
+    prev_change: Option<[f32; NUM_JOINTS]>,
     prev_contact: Option<[bool; NUM_FEET]>,
     prev_yaw: Option<f32>,
     episode_heading_change: f32,
@@ -97,11 +100,18 @@ impl GaitMeter {
             self.non_foot_contact_steps += 1;
         }
         if let Some(prev) = self.prev_targets {
-            let sq: f32 = (0..NUM_JOINTS)
-                .map(|j| (s.targets[j] - prev[j]).powi(2))
-                .sum();
+            let change: [f32; NUM_JOINTS] = std::array::from_fn(|j| s.targets[j] - prev[j]);
+            let sq: f32 = change.iter().map(|d| d * d).sum();
             self.target_change_sq_sum += (sq / NUM_JOINTS as f32) as f64;
             self.target_change_steps += 1;
+            if let Some(prev_change) = self.prev_change {
+                let sq: f32 = (0..NUM_JOINTS)
+                    .map(|j| (change[j] - prev_change[j]).powi(2))
+                    .sum();
+                self.target_second_diff_sq_sum += (sq / NUM_JOINTS as f32) as f64;
+                self.target_second_diff_steps += 1;
+            }
+            self.prev_change = Some(change);
         }
         self.prev_targets = Some(*s.targets);
         let (mut tau, mut power) = (0.0f32, 0.0f32);
@@ -126,6 +136,7 @@ impl GaitMeter {
             self.heading_changes.push(self.episode_heading_change);
         }
         self.prev_targets = None;
+        self.prev_change = None;
         self.prev_contact = None;
         self.prev_yaw = None;
         self.episode_heading_change = 0.0;
@@ -143,6 +154,8 @@ impl GaitMeter {
         self.non_foot_contact_steps += other.non_foot_contact_steps;
         self.target_change_sq_sum += other.target_change_sq_sum;
         self.target_change_steps += other.target_change_steps;
+        self.target_second_diff_sq_sum += other.target_second_diff_sq_sum;
+        self.target_second_diff_steps += other.target_second_diff_steps;
         self.abs_torque_sum += other.abs_torque_sum;
         self.power_sum += other.power_sum;
         self.heading_changes
@@ -183,6 +196,9 @@ impl GaitMeter {
             non_foot_contact_share: (self.non_foot_contact_steps as f64 / n) as f32,
             target_change_rms: (self.target_change_sq_sum / self.target_change_steps.max(1) as f64)
                 .sqrt() as f32,
+            target_second_diff_rms: (self.target_second_diff_sq_sum
+                / self.target_second_diff_steps.max(1) as f64)
+                .sqrt() as f32,
             mean_abs_torque: (self.abs_torque_sum / n) as f32,
             mean_power: (self.power_sum / n) as f32,
             heading_drift_rad: drift,
@@ -210,6 +226,10 @@ pub struct GaitReport {
     pub non_foot_contact_share: f32,
     /// RMS joint-target change per control step (rad).
     pub target_change_rms: f32,
+    /// RMS second difference of the joint targets (rad): ≈ 4× the amplitude for a sign flip every
+    /// step (25 Hz chatter at 50 Hz), ≈ (2π f dt)² × amplitude for a smooth gait at f Hz — tells
+    /// chatter from fast but smooth stepping, which `target_change_rms` alone cannot.
+    pub target_second_diff_rms: f32,
     /// Mean |τ| over joints (N·m).
     pub mean_abs_torque: f32,
     /// Mean Σ|τ·q̇| (W).
@@ -369,6 +389,10 @@ mod tests {
             assert!((hz - expected).abs() < 1e-4, "foot {f}: {hz} vs {expected}");
         }
         assert!((r.target_change_rms - 0.01).abs() < 1e-5);
+        assert!(
+            r.target_second_diff_rms < 1e-5,
+            "a ramp has no second difference"
+        );
         assert!((r.base_height_pct - 90.0).abs() < 1e-3);
         assert_eq!(r.non_foot_contact_share, 0.0);
     }
@@ -389,6 +413,7 @@ mod tests {
         }
         let r = meter.report(0.30);
         assert!((r.target_change_rms - 0.2).abs() < 1e-5);
+        assert!((r.target_second_diff_rms - 0.4).abs() < 1e-5);
         assert!((r.non_foot_contact_share - 0.5).abs() < 1e-6);
         assert_eq!(r.swing_share, [0.0; NUM_FEET]);
         assert!((r.mean_abs_torque - 2.0).abs() < 1e-6);
@@ -443,6 +468,7 @@ mod tests {
             touchdown_hz: [2.0; NUM_FEET],
             non_foot_contact_share: 0.0,
             target_change_rms: 0.03,
+            target_second_diff_rms: 0.01,
             mean_abs_torque: 3.0,
             mean_power: 40.0,
             heading_drift_rad: 0.1,

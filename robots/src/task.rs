@@ -425,6 +425,9 @@ pub struct TaskEnvState {
     pub command: Command,
     /// The action applied in the last step (observation `last_action`; IsaacLab `action`).
     pub last_action: [f32; NUM_JOINTS],
+    /// The policy's mean action in the last step (what `action_rate_l2` differences; equals
+    /// `last_action` when the caller gives no means).
+    pub last_mean_action: [f32; NUM_JOINTS],
     /// Joint velocities at the previous step (for `dof_acc_l2`).
     pub last_joint_vel: [f32; NUM_JOINTS],
     /// Current air time per foot (s).
@@ -758,6 +761,33 @@ impl Task {
         action: &[f32; NUM_JOINTS],
         terrain: &Terrain,
     ) -> StepResult {
+        self.evaluate_with_mean(env, state, action, None, terrain)
+    }
+
+    /// [`Task::evaluate`] where `action_rate_l2` differences the policy's mean action (`mean`,
+    /// clipped like actions) instead of the sampled one: the deployed, deterministic policy is
+    /// the mean, so its smoothness is what is penalised, and exploration noise — an unavoidable
+    /// 2σ² per joint per step — is not (with `only_positive_rewards` that noise floor alone zeroed
+    /// early rewards at a useful weight).
+    pub fn evaluate_with_mean(
+        &self,
+        env: &mut TaskEnvState,
+        state: &RobotState,
+        action: &[f32; NUM_JOINTS],
+        mean: Option<&[f32; NUM_JOINTS]>,
+        terrain: &Terrain,
+    ) -> StepResult {
+        let c = self.spec.action_clip;
+        let smooth: [f32; NUM_JOINTS] = match mean {
+            Some(m) => std::array::from_fn(|j| {
+                if m[j].is_finite() {
+                    m[j].clamp(-c, c)
+                } else {
+                    0.0
+                }
+            }),
+            None => *action,
+        };
         let mut out = StepResult::default();
         env.episode.steps += 1;
         if !state.is_finite() {
@@ -808,7 +838,7 @@ impl Task {
             torque += state.joint_torque[j] * state.joint_torque[j];
             let a = (state.joint_vel[j] - env.last_joint_vel[j]) / dt;
             acc += a * a;
-            let d = action[j] - env.last_action[j];
+            let d = smooth[j] - env.last_mean_action[j];
             rate += d * d;
             let l = self.soft_limits[j];
             let q = state.joint_pos[j];
@@ -862,6 +892,7 @@ impl Task {
         env.episode.lin_vel_err_sum += lin_err_sq.sqrt();
         env.episode.ang_vel_err_sum += ang_err.abs();
         env.last_action = *action;
+        env.last_mean_action = smooth;
         env.last_joint_vel = state.joint_vel;
 
         // --- terminations
@@ -1181,6 +1212,7 @@ mod tests {
             ..Default::default()
         };
         env.last_action = [0.1; 12];
+        env.last_mean_action = [0.1; 12]; // no means given below: the previous action was 0.1
         st.base_lin_vel_w = [0.0, 0.0, 0.5];
         st.base_ang_vel_w = [0.3, -0.4, 0.0];
         st.joint_torque = [2.0; 12];
@@ -1318,6 +1350,30 @@ mod tests {
         cfg.randomization.joint_damping = Some([2.0, 2.0]);
         let task = Task::new(cfg.resolve("a1").unwrap(), a1_params()).unwrap();
         assert!((0..100).all(|_| task.sample_body_randomization(&mut rng).joint_damping == 2.0));
+    }
+
+    #[test]
+    fn action_rate_penalises_the_mean_not_the_exploration_noise() {
+        let (task, terrain) = flat_task("a1");
+        let w = task.spec.rewards.action_rate_l2;
+        let dt = 0.02;
+        let mut rng = StdRng::seed_from_u64(4);
+        let st = standing_state();
+        let mut env = TaskEnvState::new();
+        task.reset_env(&mut env, &st, [0.0; 3], &mut rng);
+        // A constant mean of 0.2 with noisy samples: only the first step's change (0 → 0.2) counts.
+        let mean = [0.2; 12];
+        let r1 = task.evaluate_with_mean(&mut env, &st, &[0.9; 12], Some(&mean), &terrain);
+        let want = w * 12.0 * 0.04 * dt;
+        assert!((r1.terms[RewardTerm::ActionRateL2 as usize] - want).abs() < 1e-7);
+        let r2 = task.evaluate_with_mean(&mut env, &st, &[-0.7; 12], Some(&mean), &terrain);
+        assert_eq!(r2.terms[RewardTerm::ActionRateL2 as usize], 0.0);
+        // The observation still sees the applied (sampled) action.
+        assert_eq!(env.last_action, [-0.7; 12]);
+        // Without means the sampled action counts, against the last mean (0.2 → 0.5).
+        let r3 = task.evaluate(&mut env, &st, &[0.5; 12], &terrain);
+        let want = w * 12.0 * (0.5f32 - 0.2).powi(2) * dt;
+        assert!((r3.terms[RewardTerm::ActionRateL2 as usize] - want).abs() < 1e-6);
     }
 
     #[test]

@@ -135,6 +135,9 @@ struct Worker {
     envs: Vec<TaskEnvState>,
     states: Vec<RobotState>,
     actions: Vec<[f32; NUM_JOINTS]>,
+    /// The policy's mean actions for the next step (see [`VecEnv::set_action_means`]).
+    means: Vec<[f32; NUM_JOINTS]>,
+    has_means: bool,
     targets: Vec<[f32; NUM_JOINTS]>,
     results: Vec<StepResult>,
     origins: Vec<[f32; 3]>,
@@ -290,6 +293,8 @@ impl VecEnv {
                 envs: vec![TaskEnvState::new(); n],
                 states: vec![RobotState::default(); n],
                 actions: vec![[0.0; NUM_JOINTS]; n],
+                means: vec![[0.0; NUM_JOINTS]; n],
+                has_means: false,
                 targets: vec![spec.default_pose; n],
                 results: vec![StepResult::default(); n],
                 origins,
@@ -386,6 +391,28 @@ impl VecEnv {
             .iter()
             .find(|w| e >= w.first_env && e < w.first_env + w.n)
             .map(|w| &w.states[e - w.first_env])
+    }
+
+    /// The policy's mean actions (`[num_envs * 12]`) behind the next [`VecEnv::step`]'s sampled
+    /// actions: `action_rate_l2` then penalises the mean's changes, not the exploration noise
+    /// (see [`Task::evaluate_with_mean`]). Applies to one step; without it the sampled actions count.
+    pub fn set_action_means(&mut self, means: &[f32]) -> Result<(), VecEnvError> {
+        if means.len() != self.num_envs * NUM_JOINTS {
+            return Err(VecEnvError::ActionLength {
+                expected: self.num_envs * NUM_JOINTS,
+                num_envs: self.num_envs,
+                action_dim: NUM_JOINTS,
+                got: means.len(),
+            });
+        }
+        for w in &mut self.workers {
+            for i in 0..w.n {
+                let e = w.first_env + i;
+                w.means[i].copy_from_slice(&means[e * NUM_JOINTS..(e + 1) * NUM_JOINTS]);
+            }
+            w.has_means = true;
+        }
+        Ok(())
     }
 
     /// Starts measuring gait diagnostics (see [`crate::gait`]) on every env from the next step;
@@ -604,10 +631,14 @@ fn physics_and_rewards(shared: &Shared, w: &mut Worker, actions: &[f32]) {
     w.t_physics += t.elapsed();
     let t = Instant::now();
     for i in 0..w.n {
-        w.results[i] =
-            shared
-                .task
-                .evaluate(&mut w.envs[i], &w.states[i], &w.actions[i], &shared.terrain);
+        let mean = w.has_means.then_some(&w.means[i]);
+        w.results[i] = shared.task.evaluate_with_mean(
+            &mut w.envs[i],
+            &w.states[i],
+            &w.actions[i],
+            mean,
+            &shared.terrain,
+        );
         if w.results[i].reason == DoneReason::NonFinite {
             w.nan_resets += 1;
         }
@@ -626,6 +657,7 @@ fn physics_and_rewards(shared: &Shared, w: &mut Worker, actions: &[f32]) {
             }
         }
     }
+    w.has_means = false;
     w.t_rewards += t.elapsed();
 }
 
