@@ -529,7 +529,7 @@ pub async fn run<E: RolloutEnv>(
 }
 
 /// What `l3p eval` reports: means over finished episodes.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct EvalSummary {
     pub episodes: usize,
     pub episode_return: f32,

@@ -140,14 +140,8 @@ pub fn load_policy(reference: &str, data_dir: &Path) -> anyhow::Result<DeployPol
 pub struct EvalRow {
     /// Forward speed command (m/s), or `None` for the config's command distribution.
     pub forward: Option<f32>,
-    pub episodes: usize,
-    pub episode_return: f32,
-    pub episode_length: f32,
-    pub terrain_level: f32,
-    pub lin_vel_error: f32,
-    pub yaw_rate_error: f32,
-    pub fall_fraction: f32,
-    pub gait: Option<l3p_robots::gait::GaitReport>,
+    #[serde(flatten)]
+    pub summary: l3p_actor::EvalSummary,
     /// Walk-criterion bounds that fail (empty: it walks).
     pub walk_failures: Vec<String>,
 }
@@ -180,14 +174,7 @@ pub fn evaluate_row(
     };
     Ok(EvalRow {
         forward,
-        episodes: s.episodes,
-        episode_return: s.episode_return,
-        episode_length: s.episode_length,
-        terrain_level: s.terrain_level,
-        lin_vel_error: s.lin_vel_error,
-        yaw_rate_error: s.yaw_rate_error,
-        fall_fraction: s.fall_fraction,
-        gait: s.gait,
+        summary: s,
         walk_failures,
     })
 }
@@ -281,7 +268,7 @@ pub fn format_rows(rows: &[EvalRow]) -> String {
             .collect::<String>()
     };
     let gait = |r: &EvalRow, f: &dyn Fn(&l3p_robots::gait::GaitReport) -> String| {
-        r.gait.as_ref().map(f).unwrap_or_else(|| "-".into())
+        r.summary.gait.as_ref().map(f).unwrap_or_else(|| "-".into())
     };
     let lines: Vec<(&str, String)> = vec![
         (
@@ -291,28 +278,31 @@ pub fn format_rows(rows: &[EvalRow]) -> String {
                 None => "training mix".into(),
             }),
         ),
-        ("episodes", col(&|r| r.episodes.to_string())),
+        ("episodes", col(&|r| r.summary.episodes.to_string())),
         (
             "xy-velocity tracking error",
-            col(&|r| format!("{:.3} m/s", r.lin_vel_error)),
+            col(&|r| format!("{:.3} m/s", r.summary.lin_vel_error)),
         ),
         (
             "yaw-rate tracking error",
-            col(&|r| format!("{:.3} rad/s", r.yaw_rate_error)),
+            col(&|r| format!("{:.3} rad/s", r.summary.yaw_rate_error)),
         ),
         (
             "falls",
-            col(&|r| format!("{:.1}%", 100.0 * r.fall_fraction)),
+            col(&|r| format!("{:.1}%", 100.0 * r.summary.fall_fraction)),
         ),
         (
             "episode reward",
-            col(&|r| format!("{:.3}", r.episode_return)),
+            col(&|r| format!("{:.3}", r.summary.episode_return)),
         ),
         (
             "episode length",
-            col(&|r| format!("{:.1} steps", r.episode_length)),
+            col(&|r| format!("{:.1} steps", r.summary.episode_length)),
         ),
-        ("terrain level", col(&|r| format!("{:.2}", r.terrain_level))),
+        (
+            "terrain level",
+            col(&|r| format!("{:.2}", r.summary.terrain_level)),
+        ),
         (
             "base height above ground",
             col(&|r| gait(r, &|g| format!("{:.3} m", g.base_height_mean))),
@@ -368,6 +358,16 @@ pub fn format_rows(rows: &[EvalRow]) -> String {
         (
             "  second difference RMS",
             col(&|r| gait(r, &|g| format!("{:.3} rad", g.target_second_diff_rms))),
+        ),
+        (
+            "  per joint abd/hip/knee",
+            col(&|r| {
+                gait(r, &|g| {
+                    let d = &g.joint_second_diff_rms;
+                    let leg = |j: usize| (d[j] + d[j + 3] + d[j + 6] + d[j + 9]) / 4.0;
+                    format!("{:.2}/{:.2}/{:.2}", leg(0), leg(1), leg(2))
+                })
+            }),
         ),
         (
             "mean |torque|",

@@ -403,6 +403,9 @@ pub struct RewardScales {
     pub trot_contact: f32,
     /// Σ |q − q_default| over the hip abduction joints.
     pub joint_deviation_l1: f32,
+    /// Σ (a_t − 2 a_{t−1} + a_{t−2})² of the policy's mean action: zero for smooth motion at any
+    /// speed, 16 a² for a sign flip every step (the 25 Hz chatter).
+    pub action_smoothness_l2: f32,
 }
 
 impl Default for RewardScales {
@@ -423,6 +426,7 @@ impl Default for RewardScales {
             base_height_l2: 0.0,
             trot_contact: 0.0,
             joint_deviation_l1: 0.0,
+            action_smoothness_l2: 0.0,
         }
     }
 }
@@ -464,12 +468,15 @@ impl RewardScales {
     /// l3p's gait recipe on top of IsaacLab's tables (measured in BENCHMARKS.md "A real trot"):
     /// IsaacLab's flat A1 learned a crouched, chattering shuffle with its knees on the floor, so
     /// the base is held near standing height, feet move in diagonal pairs, thighs and calves may
-    /// not touch the ground and hips stay near their default abduction. (A heavier action-rate weight,
-    /// −0.05, made every early step's clipped reward zero at the initial action noise: no signal.)
+    /// not touch the ground, hips stay near their default abduction, and the policy's mean action
+    /// changes smoothly (`action_rate_l2` −0.05 and `action_smoothness_l2` −0.1, both on the mean:
+    /// on the sampled actions the exploration noise alone zeroed every early clipped reward).
     pub fn add_gait_terms(&mut self, family: RobotFamily) {
-        self.base_height_l2 = -20.0;
+        self.base_height_l2 = -40.0;
         self.trot_contact = 0.5;
         self.joint_deviation_l1 = -0.1;
+        self.action_rate_l2 = -0.05;
+        self.action_smoothness_l2 = -0.1;
         if family == RobotFamily::Unitree {
             self.undesired_contacts = -1.0;
         }
@@ -493,6 +500,7 @@ overrides! {
         base_height_l2: f32,
         trot_contact: f32,
         joint_deviation_l1: f32,
+        action_smoothness_l2: f32,
     }
 }
 
@@ -793,9 +801,10 @@ base_height_fraction = 1.0
 # flat_orientation_l2 = 0.0
 # dof_pos_limits = 0.0
 # l3p's gait terms (RewardScales::add_gait_terms):
-# base_height_l2 = -20.0
+# base_height_l2 = -40.0
 # trot_contact = 0.5
 # joint_deviation_l1 = -0.1
+# action_smoothness_l2 = -0.1 (and action_rate_l2 = -0.05; both on the policy's mean action)
 
 # Randomisation defaults to the robot's IsaacLab events (RandomizationConfig::for_robot).
 [randomization]
@@ -1073,6 +1082,7 @@ impl RewardScales {
             ("base_height_l2", self.base_height_l2),
             ("trot_contact", self.trot_contact),
             ("joint_deviation_l1", self.joint_deviation_l1),
+            ("action_smoothness_l2", self.action_smoothness_l2),
         ]
     }
 }
@@ -1102,9 +1112,11 @@ mod tests {
         // The l3p recipe adds its gait terms and actuator ranges on top, nothing else.
         let l3p = EnvConfig::default().resolve("a1").unwrap();
         let mut expected = RewardScales::for_robot("a1", true);
-        expected.base_height_l2 = -20.0;
+        expected.base_height_l2 = -40.0;
         expected.trot_contact = 0.5;
         expected.joint_deviation_l1 = -0.1;
+        expected.action_rate_l2 = -0.05;
+        expected.action_smoothness_l2 = -0.1;
         expected.undesired_contacts = -1.0;
         assert_eq!(l3p.rewards, expected);
         assert_eq!(l3p.randomization.joint_damping, [0.0, 2.0]);

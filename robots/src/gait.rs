@@ -44,6 +44,8 @@ pub struct GaitMeter {
     target_change_steps: u64,
     target_second_diff_sq_sum: f64,
     target_second_diff_steps: u64,
+    /// Per joint Σ (second difference)², over `target_second_diff_steps`.
+    joint_second_diff_sq_sum: [f64; NUM_JOINTS],
     abs_torque_sum: f64,
     power_sum: f64,
     // per-episode state
@@ -105,9 +107,12 @@ impl GaitMeter {
             self.target_change_sq_sum += (sq / NUM_JOINTS as f32) as f64;
             self.target_change_steps += 1;
             if let Some(prev_change) = self.prev_change {
-                let sq: f32 = (0..NUM_JOINTS)
-                    .map(|j| (change[j] - prev_change[j]).powi(2))
-                    .sum();
+                let mut sq = 0.0f32;
+                for j in 0..NUM_JOINTS {
+                    let d2 = (change[j] - prev_change[j]).powi(2);
+                    self.joint_second_diff_sq_sum[j] += d2 as f64;
+                    sq += d2;
+                }
                 self.target_second_diff_sq_sum += (sq / NUM_JOINTS as f32) as f64;
                 self.target_second_diff_steps += 1;
             }
@@ -156,6 +161,9 @@ impl GaitMeter {
         self.target_change_steps += other.target_change_steps;
         self.target_second_diff_sq_sum += other.target_second_diff_sq_sum;
         self.target_second_diff_steps += other.target_second_diff_steps;
+        for j in 0..NUM_JOINTS {
+            self.joint_second_diff_sq_sum[j] += other.joint_second_diff_sq_sum[j];
+        }
         self.abs_torque_sum += other.abs_torque_sum;
         self.power_sum += other.power_sum;
         self.heading_changes
@@ -199,6 +207,10 @@ impl GaitMeter {
             target_second_diff_rms: (self.target_second_diff_sq_sum
                 / self.target_second_diff_steps.max(1) as f64)
                 .sqrt() as f32,
+            joint_second_diff_rms: std::array::from_fn(|j| {
+                (self.joint_second_diff_sq_sum[j] / self.target_second_diff_steps.max(1) as f64)
+                    .sqrt() as f32
+            }),
             mean_abs_torque: (self.abs_torque_sum / n) as f32,
             mean_power: (self.power_sum / n) as f32,
             heading_drift_rad: drift,
@@ -230,6 +242,9 @@ pub struct GaitReport {
     /// step (25 Hz chatter at 50 Hz), ≈ (2π f dt)² × amplitude for a smooth gait at f Hz — tells
     /// chatter from fast but smooth stepping, which `target_change_rms` alone cannot.
     pub target_second_diff_rms: f32,
+    /// The second difference per joint (canonical order: per leg abduction, hip, knee), to find
+    /// which joints chatter.
+    pub joint_second_diff_rms: [f32; NUM_JOINTS],
     /// Mean |τ| over joints (N·m).
     pub mean_abs_torque: f32,
     /// Mean Σ|τ·q̇| (W).
@@ -414,6 +429,11 @@ mod tests {
         let r = meter.report(0.30);
         assert!((r.target_change_rms - 0.2).abs() < 1e-5);
         assert!((r.target_second_diff_rms - 0.4).abs() < 1e-5);
+        assert!(
+            r.joint_second_diff_rms
+                .iter()
+                .all(|d| (d - 0.4).abs() < 1e-5)
+        );
         assert!((r.non_foot_contact_share - 0.5).abs() < 1e-6);
         assert_eq!(r.swing_share, [0.0; NUM_FEET]);
         assert!((r.mean_abs_torque - 2.0).abs() < 1e-6);
@@ -469,6 +489,7 @@ mod tests {
             non_foot_contact_share: 0.0,
             target_change_rms: 0.03,
             target_second_diff_rms: 0.01,
+            joint_second_diff_rms: [0.01; NUM_JOINTS],
             mean_abs_torque: 3.0,
             mean_power: 40.0,
             heading_drift_rad: 0.1,

@@ -287,10 +287,11 @@ pub enum RewardTerm {
     BaseHeightL2,
     TrotContact,
     JointDeviationL1,
+    ActionSmoothnessL2,
 }
 
 /// Number of reward terms.
-pub const NUM_REWARD_TERMS: usize = 14;
+pub const NUM_REWARD_TERMS: usize = 15;
 
 impl RewardTerm {
     /// All terms in order.
@@ -309,6 +310,7 @@ impl RewardTerm {
         RewardTerm::BaseHeightL2,
         RewardTerm::TrotContact,
         RewardTerm::JointDeviationL1,
+        RewardTerm::ActionSmoothnessL2,
     ];
 
     /// IsaacLab term name (also the `[env.rewards]` key).
@@ -328,6 +330,7 @@ impl RewardTerm {
             RewardTerm::BaseHeightL2 => "base_height_l2",
             RewardTerm::TrotContact => "trot_contact",
             RewardTerm::JointDeviationL1 => "joint_deviation_l1",
+            RewardTerm::ActionSmoothnessL2 => "action_smoothness_l2",
         }
     }
 }
@@ -428,6 +431,8 @@ pub struct TaskEnvState {
     /// The policy's mean action in the last step (what `action_rate_l2` differences; equals
     /// `last_action` when the caller gives no means).
     pub last_mean_action: [f32; NUM_JOINTS],
+    /// The mean action one step before `last_mean_action` (for `action_smoothness_l2`).
+    pub prev_mean_action: [f32; NUM_JOINTS],
     /// Joint velocities at the previous step (for `dof_acc_l2`).
     pub last_joint_vel: [f32; NUM_JOINTS],
     /// Current air time per foot (s).
@@ -833,6 +838,7 @@ impl Task {
         let mut torque = 0.0;
         let mut acc = 0.0;
         let mut rate = 0.0;
+        let mut second = 0.0;
         let mut limits = 0.0;
         for j in 0..NUM_JOINTS {
             torque += state.joint_torque[j] * state.joint_torque[j];
@@ -840,6 +846,8 @@ impl Task {
             acc += a * a;
             let d = smooth[j] - env.last_mean_action[j];
             rate += d * d;
+            let d2 = smooth[j] - 2.0 * env.last_mean_action[j] + env.prev_mean_action[j];
+            second += d2 * d2;
             let l = self.soft_limits[j];
             let q = state.joint_pos[j];
             limits += (l[0] - q).max(0.0) + (q - l[1]).max(0.0);
@@ -847,6 +855,10 @@ impl Task {
         raw[RewardTerm::DofTorquesL2 as usize] = torque;
         raw[RewardTerm::DofAccL2 as usize] = acc;
         raw[RewardTerm::ActionRateL2 as usize] = rate;
+        // Needs two earlier actions of this episode (steps counts this one).
+        if env.episode.steps >= 3 {
+            raw[RewardTerm::ActionSmoothnessL2 as usize] = second;
+        }
         raw[RewardTerm::DofPosLimits as usize] = limits;
         if cmd.xy_norm() > p.air_time_min_command {
             let mut air = 0.0;
@@ -892,6 +904,7 @@ impl Task {
         env.episode.lin_vel_err_sum += lin_err_sq.sqrt();
         env.episode.ang_vel_err_sum += ang_err.abs();
         env.last_action = *action;
+        env.prev_mean_action = env.last_mean_action;
         env.last_mean_action = smooth;
         env.last_joint_vel = state.joint_vel;
 
@@ -1272,7 +1285,7 @@ mod tests {
         let w = task.spec.rewards.clone();
         assert_eq!(
             (w.base_height_l2, w.trot_contact, w.joint_deviation_l1),
-            (-20.0, 0.5, -0.1)
+            (-40.0, 0.5, -0.1)
         );
         let dt = 0.02;
         let mut rng = StdRng::seed_from_u64(3);
@@ -1295,7 +1308,7 @@ mod tests {
         st.joint_pos[1] += 1.0;
         let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
         let t = |k: RewardTerm| r.terms[k as usize];
-        assert!((t(RewardTerm::BaseHeightL2) - (-20.0 * 0.0144 * dt)).abs() < 1e-6);
+        assert!((t(RewardTerm::BaseHeightL2) - (-40.0 * 0.0144 * dt)).abs() < 1e-6);
         assert!((t(RewardTerm::TrotContact) - 0.5 * dt).abs() < 1e-7);
         assert!((t(RewardTerm::JointDeviationL1) - (-0.1 * 0.5 * dt)).abs() < 1e-6);
         // Pace (left pair together) and all-down are not a trot; standing still earns nothing.
@@ -1374,6 +1387,34 @@ mod tests {
         let r3 = task.evaluate(&mut env, &st, &[0.5; 12], &terrain);
         let want = w * 12.0 * (0.5f32 - 0.2).powi(2) * dt;
         assert!((r3.terms[RewardTerm::ActionRateL2 as usize] - want).abs() < 1e-6);
+    }
+
+    #[test]
+    fn action_smoothness_is_zero_on_a_ramp_and_large_on_a_flip() {
+        let mut cfg = EnvConfig::default(); // the l3p recipe
+        cfg.terrain.preset = TerrainPreset::Flat;
+        let spec = cfg.resolve("a1").unwrap();
+        let terrain = Terrain::generate(&spec.terrain).unwrap();
+        let task = Task::new(spec, a1_params()).unwrap();
+        let ws = task.spec.rewards.action_smoothness_l2;
+        assert_eq!(ws, -0.1);
+        let dt = 0.02;
+        let mut rng = StdRng::seed_from_u64(5);
+        let st = standing_state();
+        let mut env = TaskEnvState::new();
+        task.reset_env(&mut env, &st, [0.0; 3], &mut rng);
+        let smooth = |env: &mut TaskEnvState, m: f32| {
+            let r = task.evaluate_with_mean(env, &st, &[0.0; 12], Some(&[m; 12]), &terrain);
+            r.terms[RewardTerm::ActionSmoothnessL2 as usize]
+        };
+        // The first two steps of an episode have no second difference yet.
+        assert_eq!(smooth(&mut env, 0.2), 0.0);
+        assert_eq!(smooth(&mut env, 0.4), 0.0);
+        // A ramp (0.2, 0.4, 0.6) is smooth however fast; a flip back (0.4, 0.6, 0.2) is not:
+        // second difference 0.2 − 1.2 + 0.4 = −0.6 per joint.
+        assert!(smooth(&mut env, 0.6).abs() < 1e-9);
+        let want = ws * 12.0 * 0.36 * dt;
+        assert!((smooth(&mut env, 0.2) - want).abs() < 1e-6);
     }
 
     #[test]
