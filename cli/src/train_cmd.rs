@@ -46,6 +46,11 @@ pub struct TrainArgs {
     pub eval_every: u64,
 }
 
+/// Envs (and finished episodes, one 20 s episode each) per speed of a walk check.
+const WALK_CHECK_ENVS: usize = 16;
+/// Seed of the walk checks' simulations (the same every check, so checks compare policies).
+const WALK_CHECK_SEED: u64 = 11;
+
 /// One walk evaluation of a checkpoint during `--until-walks`.
 struct WalkCheck {
     iteration: u64,
@@ -81,9 +86,9 @@ fn walk_check(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<Walk
             robot,
             &e,
             &policy,
-            16,
-            16,
-            11,
+            WALK_CHECK_ENVS,
+            WALK_CHECK_ENVS,
+            WALK_CHECK_SEED,
             Some(v),
         )?);
     }
