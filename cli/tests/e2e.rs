@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 mod common;
 
-use common::{Procs, log_tails};
+use common::{Procs, log_tails, wait_for_port};
 use l3p_proto::{MetricsRecord, RolloutChunk, codec, keys};
 use l3p_registry::net::{ZenohSettings, free_loopback_port, open_session};
 
@@ -130,6 +130,12 @@ async fn distributed_training_survives_bad_input_and_dead_processes() {
         ],
         dir.path(),
     );
+    wait_for_port(
+        registry_port,
+        Duration::from_secs(60),
+        "the registry",
+        dir.path(),
+    );
     let learner_args = [
         "learner",
         "--config",
@@ -141,6 +147,12 @@ async fn distributed_training_survives_bad_input_and_dead_processes() {
         "--registry",
     ];
     procs.spawn("learner", &learner_args, dir.path());
+    wait_for_port(
+        learner_port,
+        Duration::from_secs(60),
+        "the learner",
+        dir.path(),
+    );
     for (robot, id) in [("a1", "a1-0"), ("go1", "go1-0")] {
         let args = [
             "actor",

@@ -71,6 +71,19 @@ impl Drop for Procs {
     }
 }
 
+/// Waits until something accepts TCP connections on 127.0.0.1:`port` (a spawned daemon has bound
+/// the port it was given), or panics after `timeout`. Spawning the next process only then keeps it
+/// from being handed the same, just-released ephemeral port for its own listener.
+pub fn wait_for_port(port: u16, timeout: std::time::Duration, what: &str, log_dir: &Path) {
+    let deadline = std::time::Instant::now() + timeout;
+    while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+        if std::time::Instant::now() > deadline {
+            panic!("{what} never listened on port {port}{}", log_tails(log_dir));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+}
+
 /// The last lines of every process log, for failure messages.
 pub fn log_tails(dir: &Path) -> String {
     let mut out = String::new();
@@ -78,7 +91,16 @@ pub fn log_tails(dir: &Path) -> String {
         let path = entry.path();
         if path.extension().is_some_and(|e| e == "log") {
             let text = std::fs::read_to_string(&path).unwrap_or_default();
-            let lines: Vec<&str> = text.lines().collect();
+            // Backtrace frames hide the error message above them.
+            let lines: Vec<&str> = text
+                .lines()
+                .filter(|l| {
+                    let t = l.trim_start();
+                    !(t.starts_with("at /")
+                        || t.split_once(": ")
+                            .is_some_and(|(n, _)| n.parse::<u32>().is_ok()))
+                })
+                .collect();
             out.push_str(&format!(
                 "\n--- {} ---\n{}",
                 path.display(),
