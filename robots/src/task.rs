@@ -405,6 +405,15 @@ pub struct EpisodeSummary {
     pub reason: DoneReason,
 }
 
+/// A raw action clipped to ±`clip`; non-finite becomes 0.
+fn clip_action(a: f32, clip: f32) -> f32 {
+    if a.is_finite() {
+        a.clamp(-clip, clip)
+    } else {
+        0.0
+    }
+}
+
 /// 1 when the feet move in diagonal pairs — FL with RR, FR with RL, the two pairs in opposite
 /// phases (one pair on the ground, the other in the air) — else 0. A trot without a clock: the
 /// policy needs no phase input, so the observation layout stays the deployable 48.
@@ -597,12 +606,8 @@ impl Task {
         let c = self.spec.action_clip;
         let mut bad = 0;
         for i in 0..NUM_JOINTS {
-            let a = if raw[i].is_finite() {
-                raw[i].clamp(-c, c)
-            } else {
-                bad += 1;
-                0.0
-            };
+            bad += usize::from(!raw[i].is_finite());
+            let a = clip_action(raw[i], c);
             action[i] = a;
             targets[i] = self.robot.default_joint_pos[i] + self.robot.action_scale * a;
         }
@@ -784,13 +789,7 @@ impl Task {
     ) -> StepResult {
         let c = self.spec.action_clip;
         let smooth: [f32; NUM_JOINTS] = match mean {
-            Some(m) => std::array::from_fn(|j| {
-                if m[j].is_finite() {
-                    m[j].clamp(-c, c)
-                } else {
-                    0.0
-                }
-            }),
+            Some(m) => std::array::from_fn(|j| clip_action(m[j], c)),
             None => *action,
         };
         let mut out = StepResult::default();

@@ -397,14 +397,7 @@ impl VecEnv {
     /// actions: `action_rate_l2` then penalises the mean's changes, not the exploration noise
     /// (see [`Task::evaluate_with_mean`]). Applies to one step; without it the sampled actions count.
     pub fn set_action_means(&mut self, means: &[f32]) -> Result<(), VecEnvError> {
-        if means.len() != self.num_envs * NUM_JOINTS {
-            return Err(VecEnvError::ActionLength {
-                expected: self.num_envs * NUM_JOINTS,
-                num_envs: self.num_envs,
-                action_dim: NUM_JOINTS,
-                got: means.len(),
-            });
-        }
+        self.check_action_len(means)?;
         for w in &mut self.workers {
             for i in 0..w.n {
                 let e = w.first_env + i;
@@ -455,16 +448,22 @@ impl VecEnv {
         &self.obs
     }
 
-    /// Steps every env once with `actions` (`[num_envs * 12]`, raw policy outputs).
-    pub fn step(&mut self, actions: &[f32]) -> Result<StepOutput<'_>, VecEnvError> {
-        if actions.len() != self.num_envs * NUM_JOINTS {
+    /// `[num_envs * 12]` or an error naming the expected shape.
+    fn check_action_len(&self, values: &[f32]) -> Result<(), VecEnvError> {
+        if values.len() != self.num_envs * NUM_JOINTS {
             return Err(VecEnvError::ActionLength {
                 expected: self.num_envs * NUM_JOINTS,
                 num_envs: self.num_envs,
                 action_dim: NUM_JOINTS,
-                got: actions.len(),
+                got: values.len(),
             });
         }
+        Ok(())
+    }
+
+    /// Steps every env once with `actions` (`[num_envs * 12]`, raw policy outputs).
+    pub fn step(&mut self, actions: &[f32]) -> Result<StepOutput<'_>, VecEnvError> {
+        self.check_action_len(actions)?;
         let t0 = Instant::now();
         let shared = &self.shared;
         // Phase A: actions, physics, rewards.
