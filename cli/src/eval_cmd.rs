@@ -165,7 +165,12 @@ pub fn evaluate_row(
     seed: u64,
     forward: Option<f32>,
 ) -> anyhow::Result<EvalRow> {
-    let mut sim = l3p_actor::sim_env(robot, env, envs, 1, seed)?;
+    // The policy's own action contract, whatever the config says: its filter is part of it.
+    let mut env = env.clone();
+    if let Some(io) = &policy.config.io {
+        env.action_filter_alpha = io.action_filter_alpha;
+    }
+    let mut sim = l3p_actor::sim_env(robot, &env, envs, 1, seed)?;
     let max_steps = 1000 * (episodes / envs.max(1) + 2);
     let s = l3p_actor::evaluate(&mut sim, policy, episodes, max_steps)?;
     let walk_failures = match &s.gait {

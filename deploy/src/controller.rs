@@ -390,9 +390,12 @@ impl Controller {
                         policy.act(&self.obs, &mut self.action);
                         inferred = true;
                         if self.action.iter().all(|a| a.is_finite()) {
+                            // The training task's action path (`Task::process_action`):
+                            // clip, then the contract's low-pass filter.
                             let clip = self.io.action_clip;
-                            for a in &mut self.action {
-                                *a = a.clamp(-clip, clip);
+                            let alpha = self.io.action_filter_alpha;
+                            for (a, prev) in self.action.iter_mut().zip(&self.last_action) {
+                                *a = prev + alpha * (a.clamp(-clip, clip) - prev);
                             }
                             self.last_action.clone_from(&self.action);
                             let target = self

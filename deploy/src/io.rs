@@ -3,7 +3,7 @@
 //! the policy's observation exactly as the training task does (`l3p_robots::task::Task::observe` with
 //! noise off — a test compares the two).
 
-use l3p_policy::{ObsSegment, RobotIo};
+use l3p_policy::{IO_VERSION, ObsSegment, RobotIo};
 use l3p_proto::RobotState;
 use l3p_robots::catalog::RobotSpec;
 use l3p_robots::config::{EnvConfig, HEIGHT_SCAN_OBS};
@@ -66,7 +66,8 @@ pub fn robot_io(robot: &RobotSpec, env: &EnvConfig) -> Result<RobotIo, DeployErr
         seg(
             PROPRIO_SEGMENTS[6],
             n,
-            "the previous action after clipping to ±action_clip (0 at start)",
+            "the previous applied action: raw output clipped to ±action_clip, then low-pass \
+             filtered with action_filter_alpha (0 at start)",
         ),
     ];
     if env.height_scan {
@@ -77,6 +78,7 @@ pub fn robot_io(robot: &RobotSpec, env: &EnvConfig) -> Result<RobotIo, DeployErr
         ));
     }
     Ok(RobotIo {
+        version: IO_VERSION,
         control_dt: env.sim_dt * env.decimation as f32,
         joint_names: robot.joint_names.iter().map(|s| s.to_string()).collect(),
         default_joint_pos: robot.default_pose.to_vec(),
@@ -85,6 +87,7 @@ pub fn robot_io(robot: &RobotSpec, env: &EnvConfig) -> Result<RobotIo, DeployErr
         soft_joint_limits: params.soft_limits().to_vec(),
         effort_limit: robot.effort_limit.to_vec(),
         action_clip: env.action_clip,
+        action_filter_alpha: env.action_filter_alpha,
         obs_clip: env.obs_clip,
         obs_layout,
     })

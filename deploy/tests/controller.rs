@@ -131,6 +131,78 @@ fn observation_matches_the_training_task() {
     }
 }
 
+/// A policy flipping between ±`amplitude` every call: the worst chatter.
+struct Flipping {
+    amplitude: f32,
+}
+
+impl PolicyFn for Flipping {
+    fn act(&mut self, _obs: &[f32], action: &mut [f32]) {
+        self.amplitude = -self.amplitude;
+        action.iter_mut().for_each(|a| *a = self.amplitude);
+    }
+}
+
+#[test]
+fn policy_targets_follow_the_training_action_filter() {
+    let mut env = flat_env();
+    env.action_filter_alpha = 0.4;
+    let io = robot_io(a1(), &env).unwrap();
+    assert_eq!(io.action_filter_alpha, 0.4);
+    let spec = env.resolve("a1").unwrap();
+    let robot = a1();
+    let task = Task::new(spec, robot.task_params(&robot.model().unwrap())).unwrap();
+    let mut c = Controller::new("dog", io.clone(), 0.25, SafetyConfig::default()).unwrap();
+    let mut policy = Flipping { amplitude: -0.6 };
+    let state = standing(&io);
+    let mut targets = Vec::new();
+    let mut t = 0.0;
+    while targets.len() < 6 {
+        t += DT;
+        let out = tick_at(&mut c, t, &state, t - 0.005, &mut policy);
+        if out.command.mode == ControlMode::Policy {
+            targets.push(out.command.joint_pos_target);
+        }
+    }
+    // The training task fed the same raw outputs (first call +0.6 after the flip, then ±).
+    let (mut previous, mut action, mut expected) = ([0.0; 12], [0.0; 12], [0.0; 12]);
+    let mut amplitude = -0.6f32;
+    for got in &targets {
+        amplitude = -amplitude;
+        task.process_action(&[amplitude; 12], &previous, &mut action, &mut expected)
+            .unwrap();
+        previous = action;
+        for j in 0..12 {
+            assert!(
+                (got[j] - expected[j]).abs() < 1e-5,
+                "joint {j}: {} vs {}",
+                got[j],
+                expected[j]
+            );
+        }
+    }
+    // Filtered: the target change is far below the unfiltered 2 × 0.6 × 0.25 = 0.3 rad flip.
+    let change = (targets[5][1] - targets[4][1]).abs();
+    assert!(change < 0.2, "target change {change}");
+}
+
+#[test]
+fn a_contract_from_a_newer_l3p_is_refused_and_a_version_1_one_reads_as_unfiltered() {
+    let io = a1_io();
+    let mut json = serde_json::to_value(&io).unwrap();
+    assert_eq!(json["version"], 2);
+    json["version"] = 3.into();
+    let newer: RobotIo = serde_json::from_value(json.clone()).unwrap();
+    let err = newer.check(48, 12).unwrap_err();
+    assert!(err.contains("io.version 3"), "{err}");
+    let map = json.as_object_mut().unwrap();
+    map.remove("version");
+    map.remove("action_filter_alpha");
+    let old: RobotIo = serde_json::from_value(json).unwrap();
+    assert_eq!((old.version, old.action_filter_alpha), (1, 1.0));
+    old.check(48, 12).unwrap();
+}
+
 #[test]
 fn startup_goes_zero_torque_then_ramp_then_policy() {
     let io = a1_io();

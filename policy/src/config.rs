@@ -221,6 +221,10 @@ pub struct RobotSpec {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct RobotIo {
+    /// Version of this contract. 1 (files without the field): no action filter. 2: adds
+    /// `action_filter_alpha`; a version-1 file reads as α = 1, which is what it meant.
+    #[serde(default = "io_version_1")]
+    pub version: u32,
     /// Policy period (s); 0.02 = 50 Hz.
     pub control_dt: f32,
     pub joint_names: Vec<String>,
@@ -235,6 +239,11 @@ pub struct RobotIo {
     pub effort_limit: Vec<f32>,
     /// Raw policy outputs are clipped to ±`action_clip` (non-finite outputs are a fault).
     pub action_clip: f32,
+    /// Low-pass filter of the applied action each control period:
+    /// `a = a_prev + α (clip(raw) − a_prev)`, `a` starting at 0; `a` is both the joint-target
+    /// action and the `last_action` observation. 1 = no filter.
+    #[serde(default = "no_action_filter")]
+    pub action_filter_alpha: f32,
     /// Every observation entry is clipped to ±`obs_clip` after scaling.
     pub obs_clip: f32,
     /// Observation segments in order; their lengths sum to `obs_dim`.
@@ -252,9 +261,33 @@ pub struct ObsSegment {
     pub description: String,
 }
 
+/// The `io` contract version this build writes and the newest it reads.
+pub const IO_VERSION: u32 = 2;
+
+fn io_version_1() -> u32 {
+    1
+}
+
+fn no_action_filter() -> f32 {
+    1.0
+}
+
 impl RobotIo {
-    /// Checks lengths against the policy's dimensions; errors name the field.
+    /// Checks the version and lengths against the policy's dimensions; errors name the field.
     pub fn check(&self, obs_dim: usize, action_dim: usize) -> Result<(), String> {
+        if self.version == 0 || self.version > IO_VERSION {
+            return Err(format!(
+                "io.version {} is not supported (this build reads 1 to {IO_VERSION}; \
+                 re-export the policy with this version of l3p, or update l3p)",
+                self.version
+            ));
+        }
+        if !(self.action_filter_alpha > 0.0 && self.action_filter_alpha <= 1.0) {
+            return Err(format!(
+                "io.action_filter_alpha {} is not in (0, 1]",
+                self.action_filter_alpha
+            ));
+        }
         let per_joint: [(&str, usize); 6] = [
             ("joint_names", self.joint_names.len()),
             ("default_joint_pos", self.default_joint_pos.len()),

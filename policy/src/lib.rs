@@ -30,7 +30,9 @@ pub use checkpoint::{
     Checkpoint, CheckpointHeader, checkpoint_from_bytes, checkpoint_to_bytes, core_sha256,
     export_bytes, export_to_dir, load_checkpoint, save_checkpoint,
 };
-pub use config::{Arch, ObsSegment, PolicyConfig, RecoveryConfig, RobotIo, RobotSpec, mlp_params};
+pub use config::{
+    Arch, IO_VERSION, ObsSegment, PolicyConfig, RecoveryConfig, RobotIo, RobotSpec, mlp_params,
+};
 pub use diffusion::{DdpmSchedule, ObsDiffusion, ObsDiffusionConfig};
 pub use infer::{
     DeployPolicy, EXPORT_FORMAT, ExportConfig, ExportLayer, InferScratch, replace_export_config,

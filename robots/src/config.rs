@@ -679,6 +679,10 @@ pub struct EnvConfig {
     /// Clip of raw actions before use (legged_gym `clip_actions`; IsaacLab: none). Non-finite
     /// actions are replaced by 0 regardless.
     pub action_clip: f32,
+    /// Low-pass filter of the applied action, `a = a_prev + α (clip(raw) − a_prev)` per control
+    /// step (1 = none, IsaacLab). The filtered action is what becomes the joint target and the
+    /// `last_action` observation; the deploy side applies the same filter (`io`).
+    pub action_filter_alpha: f32,
     pub terrain: TerrainConfig,
     pub commands: CommandConfig,
     pub noise: NoiseConfig,
@@ -697,6 +701,7 @@ impl Default for EnvConfig {
             height_scan: true,
             obs_clip: 100.0,
             action_clip: 100.0,
+            action_filter_alpha: 1.0,
             recipe: Recipe::L3p,
             terrain: TerrainConfig::default(),
             commands: CommandConfig::default(),
@@ -721,6 +726,9 @@ height_scan = true
 # Final clip of observations; clip of raw actions (non-finite actions become 0).
 obs_clip = 100.0
 action_clip = 100.0
+# Low-pass filter of the applied action per control step: a = a_prev + alpha (clip(raw) - a_prev);
+# 1 = none (IsaacLab). Deploy applies the same filter (it is part of the export's io contract).
+action_filter_alpha = 1.0
 # Defaults of [rewards] and [randomization]: "l3p" (IsaacLab's per-robot tables plus l3p's gait
 # terms and actuator randomisation) or "isaaclab" (the tables alone).
 recipe = "l3p"
@@ -850,6 +858,8 @@ pub struct TaskSpec {
     pub obs_dim: usize,
     pub obs_clip: f32,
     pub action_clip: f32,
+    /// See [`EnvConfig::action_filter_alpha`]; in (0, 1].
+    pub action_filter_alpha: f32,
     pub terrain: TerrainSpec,
     pub commands: CommandConfig,
     pub noise: NoiseConfig,
@@ -932,6 +942,12 @@ impl EnvConfig {
         check_pos("episode_length_s", self.episode_length_s)?;
         check_pos("obs_clip", self.obs_clip)?;
         check_pos("action_clip", self.action_clip)?;
+        if !(self.action_filter_alpha > 0.0 && self.action_filter_alpha <= 1.0) {
+            return Err(invalid(
+                "action_filter_alpha",
+                format!("{} not in (0, 1]", self.action_filter_alpha),
+            ));
+        }
         let c = &self.commands;
         check_range("commands.lin_vel_x", c.lin_vel_x)?;
         check_range("commands.lin_vel_y", c.lin_vel_y)?;
@@ -1053,6 +1069,7 @@ impl EnvConfig {
             },
             obs_clip: self.obs_clip,
             action_clip: self.action_clip,
+            action_filter_alpha: self.action_filter_alpha,
             terrain,
             commands: self.commands.clone(),
             noise: self.noise.clone(),

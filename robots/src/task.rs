@@ -587,12 +587,15 @@ impl Task {
         &self.soft_limits
     }
 
-    /// Raw policy output → `action` (non-finite entries replaced by 0, clipped to ±`action_clip`)
-    /// and joint targets `q* = default + action_scale · action`. Returns the number of non-finite
-    /// entries replaced.
+    /// Raw policy output → applied `action` and joint targets `q* = default + action_scale ·
+    /// action`. Non-finite entries are replaced by 0 and the rest clipped to ±`action_clip`; the
+    /// result is low-pass filtered against `previous` (the last applied action):
+    /// `action = previous + α (clip(raw) − previous)` with α = `action_filter_alpha` (1 = no
+    /// filter). Returns the number of non-finite entries replaced.
     pub fn process_action(
         &self,
         raw: &[f32],
+        previous: &[f32; NUM_JOINTS],
         action: &mut [f32; NUM_JOINTS],
         targets: &mut [f32; NUM_JOINTS],
     ) -> Result<usize, TaskError> {
@@ -604,10 +607,11 @@ impl Task {
             });
         }
         let c = self.spec.action_clip;
+        let alpha = self.spec.action_filter_alpha;
         let mut bad = 0;
         for i in 0..NUM_JOINTS {
             bad += usize::from(!raw[i].is_finite());
-            let a = clip_action(raw[i], c);
+            let a = previous[i] + alpha * (clip_action(raw[i], c) - previous[i]);
             action[i] = a;
             targets[i] = self.robot.default_joint_pos[i] + self.robot.action_scale * a;
         }
@@ -1585,6 +1589,42 @@ mod tests {
     }
 
     #[test]
+    fn the_action_filter_is_an_exponential_moving_average_of_the_clipped_action() {
+        let (mut task, _) = flat_task("a1");
+        task.spec.action_filter_alpha = 0.25;
+        let (mut a, mut q) = ([0.0; 12], [0.0; 12]);
+        let mut previous = [0.0f32; 12];
+        previous[1] = 0.8;
+        let mut raw = [1.0f32; 12];
+        raw[1] = 1e9; // clipped to 100 before filtering
+        raw[2] = f32::NAN; // treated as 0
+        task.process_action(&raw, &previous, &mut a, &mut q)
+            .unwrap();
+        assert!((a[0] - 0.25).abs() < 1e-6);
+        assert!((a[1] - (0.8 + 0.25 * (100.0 - 0.8))).abs() < 1e-4);
+        assert_eq!(a[2], 0.0);
+        assert!((q[0] - (0.1 + 0.25 * 0.25)).abs() < 1e-6);
+        // A step input converges geometrically: 1 − (1 − α)^n after n steps.
+        let mut prev = [0.0; 12];
+        for _ in 0..4 {
+            task.process_action(&[1.0; 12], &prev, &mut a, &mut q)
+                .unwrap();
+            prev = a;
+        }
+        assert!((a[5] - (1.0 - 0.75f32.powi(4))).abs() < 1e-6);
+        // A flip every step is attenuated to α / (2 − α) of its amplitude in steady state.
+        let mut prev = [0.0; 12];
+        let mut sign = 1.0;
+        for _ in 0..60 {
+            task.process_action(&[sign; 12], &prev, &mut a, &mut q)
+                .unwrap();
+            prev = a;
+            sign = -sign;
+        }
+        assert!((a[7].abs() - 0.25 / 1.75).abs() < 1e-5);
+    }
+
+    #[test]
     fn actions_targets_and_reset_sampling() {
         let (task, terrain) = flat_task("a1");
         let mut a = [0.0; 12];
@@ -1592,13 +1632,18 @@ mod tests {
         let mut raw = [1.0f32; 12];
         raw[2] = f32::NAN;
         raw[3] = 1e9;
-        let bad = task.process_action(&raw, &mut a, &mut q).unwrap();
+        let bad = task
+            .process_action(&raw, &[0.0; 12], &mut a, &mut q)
+            .unwrap();
         assert_eq!(bad, 1);
         assert_eq!(a[2], 0.0);
         assert_eq!(a[3], 100.0);
         assert!((q[0] - (0.1 + 0.25)).abs() < 1e-6);
         assert_eq!(q[2], -1.5);
-        assert!(task.process_action(&raw[..5], &mut a, &mut q).is_err());
+        assert!(
+            task.process_action(&raw[..5], &[0.0; 12], &mut a, &mut q)
+                .is_err()
+        );
         let mut rng = StdRng::seed_from_u64(2);
         // A1 (IsaacLab): default pose, zero velocities, xy within ±0.5, any yaw
         for _ in 0..50 {

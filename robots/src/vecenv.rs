@@ -597,9 +597,12 @@ fn physics_and_rewards(shared: &Shared, w: &mut Worker, actions: &[f32]) {
     for i in 0..w.n {
         let raw = &actions[i * NUM_JOINTS..(i + 1) * NUM_JOINTS];
         // Length is checked by the caller; a bad length can only come from a bug.
-        let _ = shared
-            .task
-            .process_action(raw, &mut w.actions[i], &mut w.targets[i]);
+        let _ = shared.task.process_action(
+            raw,
+            &w.envs[i].last_action,
+            &mut w.actions[i],
+            &mut w.targets[i],
+        );
         w.sim.set_targets(i, &w.targets[i]);
     }
     w.sim.clear_contact_maxima();
