@@ -84,6 +84,67 @@ macro_rules! overrides {
     };
 }
 
+/// The reward-term table, written once: each row `Variant => field = default weight` declares
+/// the [`RewardTerm`] variant (the index of every per-term array), its name (the IsaacLab term
+/// name, the `[env.rewards]` key and the `Episode_Reward/<name>` metric), the [`RewardScales`]
+/// field with its default weight, and the [`RewardOverrides`] field.
+macro_rules! reward_terms {
+    ($($(#[$doc:meta])* $variant:ident => $field:ident = $default:expr),* $(,)?) => {
+        /// Reward terms, in the order of every per-term array (`[f32; NUM_REWARD_TERMS]`).
+        #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+        #[repr(usize)]
+        pub enum RewardTerm {
+            $($(#[$doc])* $variant,)*
+        }
+
+        /// Number of reward terms.
+        pub const NUM_REWARD_TERMS: usize = [$(RewardTerm::$variant),*].len();
+
+        impl RewardTerm {
+            /// All terms in order.
+            pub const ALL: [RewardTerm; NUM_REWARD_TERMS] = [$(RewardTerm::$variant),*];
+
+            /// IsaacLab term name (also the `[env.rewards]` key).
+            pub fn name(self) -> &'static str {
+                match self {
+                    $(RewardTerm::$variant => stringify!($field),)*
+                }
+            }
+        }
+
+        /// Weights of the reward terms: each adds `weight · value · dt` with `dt` the policy
+        /// step (0.02 s), like IsaacLab's `RewardManager`. Defaults: IsaacLab 2.1's base
+        /// `RewardsCfg` (= ANYmal B/C/D rough).
+        #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+        #[serde(deny_unknown_fields)]
+        pub struct RewardScales {
+            $($(#[$doc])* pub $field: f32,)*
+        }
+
+        impl Default for RewardScales {
+            fn default() -> Self {
+                RewardScales {
+                    $($field: $default,)*
+                }
+            }
+        }
+
+        impl RewardScales {
+            /// `(name, weight)` pairs in [`RewardTerm`] order.
+            pub fn named(&self) -> [(&'static str, f32); NUM_REWARD_TERMS] {
+                [$((stringify!($field), self.$field),)*]
+            }
+        }
+
+        overrides! {
+            /// `[env.rewards]`: per-term weight overrides on top of [`RewardScales::for_robot`].
+            RewardOverrides for RewardScales {
+                $($field: f32,)*
+            }
+        }
+    };
+}
+
 // ---------------------------------------------------------------------------------------------
 // Terrain
 
@@ -381,54 +442,27 @@ impl Default for RewardParams {
 // ---------------------------------------------------------------------------------------------
 // Rewards
 
-/// Reward weights. Each term is `weight · value · dt` with `dt` the policy step (0.02 s).
-/// Field names are IsaacLab's reward-term names.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct RewardScales {
-    pub track_lin_vel_xy_exp: f32,
-    pub track_ang_vel_z_exp: f32,
-    pub lin_vel_z_l2: f32,
-    pub ang_vel_xy_l2: f32,
-    pub dof_torques_l2: f32,
-    pub dof_acc_l2: f32,
-    pub action_rate_l2: f32,
-    pub feet_air_time: f32,
-    pub undesired_contacts: f32,
-    pub flat_orientation_l2: f32,
-    pub dof_pos_limits: f32,
+reward_terms! {
+    TrackLinVelXyExp => track_lin_vel_xy_exp = 1.0,
+    TrackAngVelZExp => track_ang_vel_z_exp = 0.5,
+    LinVelZL2 => lin_vel_z_l2 = -2.0,
+    AngVelXyL2 => ang_vel_xy_l2 = -0.05,
+    DofTorquesL2 => dof_torques_l2 = -1.0e-5,
+    DofAccL2 => dof_acc_l2 = -2.5e-7,
+    ActionRateL2 => action_rate_l2 = -0.01,
+    FeetAirTime => feet_air_time = 0.125,
+    UndesiredContacts => undesired_contacts = -1.0,
+    FlatOrientationL2 => flat_orientation_l2 = 0.0,
+    DofPosLimits => dof_pos_limits = 0.0,
     /// `(h − fraction · standing)²`, h = base height above the terrain under it.
-    pub base_height_l2: f32,
+    BaseHeightL2 => base_height_l2 = 0.0,
     /// 1 while the feet move in diagonal pairs (see `task::trot_contact`), when commanded to move.
-    pub trot_contact: f32,
+    TrotContact => trot_contact = 0.0,
     /// Σ |q − q_default| over the hip abduction joints.
-    pub joint_deviation_l1: f32,
+    JointDeviationL1 => joint_deviation_l1 = 0.0,
     /// Σ (a_t − 2 a_{t−1} + a_{t−2})² of the policy's mean action: zero for smooth motion at any
     /// speed, 16 a² for a sign flip every step (the 25 Hz chatter).
-    pub action_smoothness_l2: f32,
-}
-
-impl Default for RewardScales {
-    /// IsaacLab 2.1 base `RewardsCfg` (= ANYmal B/C/D rough).
-    fn default() -> Self {
-        RewardScales {
-            track_lin_vel_xy_exp: 1.0,
-            track_ang_vel_z_exp: 0.5,
-            lin_vel_z_l2: -2.0,
-            ang_vel_xy_l2: -0.05,
-            dof_torques_l2: -1.0e-5,
-            dof_acc_l2: -2.5e-7,
-            action_rate_l2: -0.01,
-            feet_air_time: 0.125,
-            undesired_contacts: -1.0,
-            flat_orientation_l2: 0.0,
-            dof_pos_limits: 0.0,
-            base_height_l2: 0.0,
-            trot_contact: 0.0,
-            joint_deviation_l1: 0.0,
-            action_smoothness_l2: 0.0,
-        }
-    }
+    ActionSmoothnessL2 => action_smoothness_l2 = 0.0,
 }
 
 impl RewardScales {
@@ -480,27 +514,6 @@ impl RewardScales {
         if family == RobotFamily::Unitree {
             self.undesired_contacts = -1.0;
         }
-    }
-}
-
-overrides! {
-    /// `[env.rewards]`: per-term weight overrides on top of [`RewardScales::for_robot`].
-    RewardOverrides for RewardScales {
-        track_lin_vel_xy_exp: f32,
-        track_ang_vel_z_exp: f32,
-        lin_vel_z_l2: f32,
-        ang_vel_xy_l2: f32,
-        dof_torques_l2: f32,
-        dof_acc_l2: f32,
-        action_rate_l2: f32,
-        feet_air_time: f32,
-        undesired_contacts: f32,
-        flat_orientation_l2: f32,
-        dof_pos_limits: f32,
-        base_height_l2: f32,
-        trot_contact: f32,
-        joint_deviation_l1: f32,
-        action_smoothness_l2: f32,
     }
 }
 
@@ -1081,32 +1094,31 @@ impl EnvConfig {
     }
 }
 
-impl RewardScales {
-    /// `(name, weight)` pairs in [`crate::task::RewardTerm`] order.
-    pub fn named(&self) -> [(&'static str, f32); crate::task::NUM_REWARD_TERMS] {
-        [
-            ("track_lin_vel_xy_exp", self.track_lin_vel_xy_exp),
-            ("track_ang_vel_z_exp", self.track_ang_vel_z_exp),
-            ("lin_vel_z_l2", self.lin_vel_z_l2),
-            ("ang_vel_xy_l2", self.ang_vel_xy_l2),
-            ("dof_torques_l2", self.dof_torques_l2),
-            ("dof_acc_l2", self.dof_acc_l2),
-            ("action_rate_l2", self.action_rate_l2),
-            ("feet_air_time", self.feet_air_time),
-            ("undesired_contacts", self.undesired_contacts),
-            ("flat_orientation_l2", self.flat_orientation_l2),
-            ("dof_pos_limits", self.dof_pos_limits),
-            ("base_height_l2", self.base_height_l2),
-            ("trot_contact", self.trot_contact),
-            ("joint_deviation_l1", self.joint_deviation_l1),
-            ("action_smoothness_l2", self.action_smoothness_l2),
-        ]
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_reward_term_is_indexed_named_weighted_and_overridable_in_one_order() {
+        let scales = RewardScales::default();
+        let named = scales.named();
+        for (k, term) in RewardTerm::ALL.iter().enumerate() {
+            assert_eq!(*term as usize, k);
+            assert_eq!(term.name(), named[k].0);
+            // The name is the `[env.rewards]` key and reaches the same weight.
+            let overrides: RewardOverrides =
+                toml::from_str(&format!("{} = 123.5", term.name())).unwrap();
+            let mut s = scales.clone();
+            overrides.apply(&mut s);
+            assert_eq!(s.named()[k].1, 123.5, "{}", term.name());
+            assert_eq!(
+                s.named().iter().filter(|(_, w)| *w == 123.5).count(),
+                1,
+                "{} set another weight too",
+                term.name()
+            );
+        }
+    }
 
     #[test]
     fn default_is_isaaclab_rough_task() {

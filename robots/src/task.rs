@@ -35,6 +35,7 @@ use rand::Rng;
 use thiserror::Error;
 
 use crate::config::{HEIGHT_SCAN_OBS, PROPRIO_OBS, TaskSpec};
+pub use crate::config::{NUM_REWARD_TERMS, RewardTerm};
 use crate::terrain::Terrain;
 
 /// Actuated leg joints of every supported robot.
@@ -268,72 +269,6 @@ fn sym<R: Rng + ?Sized>(rng: &mut R, half: f32) -> f32 {
 
 // ---------------------------------------------------------------------------------------------
 // Rewards
-
-/// Reward terms, in the order of every per-term array (`[f32; NUM_REWARD_TERMS]`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-#[repr(usize)]
-pub enum RewardTerm {
-    TrackLinVelXyExp = 0,
-    TrackAngVelZExp,
-    LinVelZL2,
-    AngVelXyL2,
-    DofTorquesL2,
-    DofAccL2,
-    ActionRateL2,
-    FeetAirTime,
-    UndesiredContacts,
-    FlatOrientationL2,
-    DofPosLimits,
-    BaseHeightL2,
-    TrotContact,
-    JointDeviationL1,
-    ActionSmoothnessL2,
-}
-
-/// Number of reward terms.
-pub const NUM_REWARD_TERMS: usize = 15;
-
-impl RewardTerm {
-    /// All terms in order.
-    pub const ALL: [RewardTerm; NUM_REWARD_TERMS] = [
-        RewardTerm::TrackLinVelXyExp,
-        RewardTerm::TrackAngVelZExp,
-        RewardTerm::LinVelZL2,
-        RewardTerm::AngVelXyL2,
-        RewardTerm::DofTorquesL2,
-        RewardTerm::DofAccL2,
-        RewardTerm::ActionRateL2,
-        RewardTerm::FeetAirTime,
-        RewardTerm::UndesiredContacts,
-        RewardTerm::FlatOrientationL2,
-        RewardTerm::DofPosLimits,
-        RewardTerm::BaseHeightL2,
-        RewardTerm::TrotContact,
-        RewardTerm::JointDeviationL1,
-        RewardTerm::ActionSmoothnessL2,
-    ];
-
-    /// IsaacLab term name (also the `[env.rewards]` key).
-    pub fn name(self) -> &'static str {
-        match self {
-            RewardTerm::TrackLinVelXyExp => "track_lin_vel_xy_exp",
-            RewardTerm::TrackAngVelZExp => "track_ang_vel_z_exp",
-            RewardTerm::LinVelZL2 => "lin_vel_z_l2",
-            RewardTerm::AngVelXyL2 => "ang_vel_xy_l2",
-            RewardTerm::DofTorquesL2 => "dof_torques_l2",
-            RewardTerm::DofAccL2 => "dof_acc_l2",
-            RewardTerm::ActionRateL2 => "action_rate_l2",
-            RewardTerm::FeetAirTime => "feet_air_time",
-            RewardTerm::UndesiredContacts => "undesired_contacts",
-            RewardTerm::FlatOrientationL2 => "flat_orientation_l2",
-            RewardTerm::DofPosLimits => "dof_pos_limits",
-            RewardTerm::BaseHeightL2 => "base_height_l2",
-            RewardTerm::TrotContact => "trot_contact",
-            RewardTerm::JointDeviationL1 => "joint_deviation_l1",
-            RewardTerm::ActionSmoothnessL2 => "action_smoothness_l2",
-        }
-    }
-}
 
 /// Why an episode ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

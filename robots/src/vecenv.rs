@@ -91,7 +91,7 @@ pub struct EpisodeInfo {
     pub ang_vel_error: f32,
     /// Why it ended.
     pub reason: DoneReason,
-    /// Per reward term (weighted, × dt), summed over the episode, [`crate::task::RewardTerm`] order.
+    /// Per reward term (weighted, × dt), summed over the episode, [`crate::config::RewardTerm`] order.
     pub terms: [f32; NUM_REWARD_TERMS],
 }
 
