@@ -30,9 +30,109 @@ pub struct Config {
 }
 
 impl Config {
-    /// Load and strictly parse a config file.
+    /// Load, strictly parse and [`validate`](Config::validate) a config file: a value that would
+    /// hang or fail a process later is an error here, before anything starts.
     pub fn load(path: &Path) -> Result<Self, l3p_proto::config::ConfigError> {
-        l3p_proto::config::load_toml(path)
+        let config: Config = l3p_proto::config::load_toml(path)?;
+        config
+            .validate()
+            .map_err(|message| l3p_proto::config::ConfigError::Invalid {
+                path: path.to_path_buf(),
+                message,
+            })?;
+        Ok(config)
+    }
+
+    /// Every check that needs no process: sizes ≥ 1, finite positive rates, ranges, the env
+    /// resolved for each actor's robot, and a batch that the minibatches can split. Errors name the
+    /// key, the value and what is allowed.
+    pub fn validate(&self) -> Result<(), String> {
+        for (i, actor) in self.actors.iter().enumerate() {
+            let key = |field: &str| format!("actors[{i}].{field}");
+            if actor.envs == 0 {
+                return Err(format!("{} = 0: expected >= 1", key("envs")));
+            }
+            if actor.threads == 0 {
+                return Err(format!("{} = 0: expected >= 1", key("threads")));
+            }
+            l3p_robots::catalog::RobotSpec::by_name(&actor.robot)
+                .map_err(|e| format!("{}: {e}", key("robot")))?;
+            self.env
+                .resolve(&actor.robot)
+                .map_err(|e| format!("env (for {}): {e}", actor.robot))?;
+        }
+        if self.rollout.steps_per_env == 0 {
+            return Err("rollout.steps_per_env = 0: expected >= 1".into());
+        }
+        let ppo = &self.ppo;
+        for (key, v) in [
+            ("learning_rate", ppo.learning_rate),
+            ("lr_min", ppo.lr_min),
+            ("lr_max", ppo.lr_max),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("ppo.{key} = {v}: expected a finite number > 0"));
+            }
+        }
+        for (key, v) in [
+            ("clip_param", ppo.clip_param),
+            ("max_grad_norm", ppo.max_grad_norm),
+            ("desired_kl", ppo.desired_kl),
+            ("adam_epsilon", ppo.adam_epsilon),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return Err(format!("ppo.{key} = {v}: expected a finite number > 0"));
+            }
+        }
+        for (key, v) in [
+            ("value_loss_coef", ppo.value_loss_coef),
+            ("entropy_coef", ppo.entropy_coef),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("ppo.{key} = {v}: expected a finite number >= 0"));
+            }
+        }
+        for (key, v) in [("gamma", ppo.gamma), ("lam", ppo.lam)] {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(format!("ppo.{key} = {v}: expected 0 <= {key} <= 1"));
+            }
+        }
+        for (key, v) in [
+            ("num_learning_epochs", ppo.num_learning_epochs),
+            ("num_mini_batches", ppo.num_mini_batches),
+        ] {
+            if v == 0 {
+                return Err(format!("ppo.{key} = 0: expected >= 1"));
+            }
+        }
+        ppo.validate().map_err(|e| format!("ppo: {e}"))?;
+        let envs: usize = self.actors.iter().map(|a| a.envs).sum();
+        let batch = envs * self.rollout.steps_per_env;
+        if !self.actors.is_empty() && batch < ppo.num_mini_batches {
+            return Err(format!(
+                "ppo.num_mini_batches = {}: more than the {batch} samples per update \
+                 (actors' envs × rollout.steps_per_env)",
+                ppo.num_mini_batches
+            ));
+        }
+        self.model.validate().map_err(|e| format!("model: {e}"))?;
+        let l = &self.learner;
+        if !(l.gather_timeout_s.is_finite() && l.gather_timeout_s > 0.0) {
+            return Err(format!(
+                "learner.gather_timeout_s = {}: expected a finite number > 0",
+                l.gather_timeout_s
+            ));
+        }
+        for (key, v) in [
+            ("checkpoint_every", l.checkpoint_every),
+            ("registry_checkpoint_every", l.registry_checkpoint_every),
+        ] {
+            if v == 0 {
+                return Err(format!("learner.{key} = 0: expected >= 1"));
+            }
+        }
+        self.deploy.validate()?;
+        Ok(())
     }
 }
 

@@ -57,3 +57,63 @@ fn missing_file_is_a_clear_error() {
         "{err}"
     );
 }
+
+/// Values that parse but used to hang `l3p train` (zero sizes, a zero physics step) or fail it only
+/// after the actors had started (NaN rate, no minibatches, a negative discount): each is refused at
+/// load with the key and the value.
+#[test]
+fn values_that_would_hang_or_fail_a_run_are_refused_at_load() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("odd.toml");
+    let base = "[run]\nname = \"x\"\n";
+    let actor = |envs: &str, threads: &str| {
+        format!("[[actors]]\nrobot = \"a1\"\nenvs = {envs}\nthreads = {threads}\n")
+    };
+    let cases = [
+        (actor("0", "1"), "actors[0].envs = 0"),
+        (actor("4", "0"), "actors[0].threads = 0"),
+        (
+            format!("[env]\nsim_dt = 0.0\n{}", actor("4", "1")),
+            "sim_dt",
+        ),
+        (
+            format!("[env]\ndecimation = 0\n{}", actor("4", "1")),
+            "decimation",
+        ),
+        (
+            format!("[env]\naction_filter_alpha = 0.0\n{}", actor("4", "1")),
+            "action_filter_alpha",
+        ),
+        (
+            format!("[rollout]\nsteps_per_env = 0\n{}", actor("4", "1")),
+            "rollout.steps_per_env = 0",
+        ),
+        (
+            "[ppo]\nlearning_rate = nan\n".to_string(),
+            "ppo.learning_rate = NaN",
+        ),
+        (
+            "[ppo]\nnum_mini_batches = 0\n".to_string(),
+            "ppo.num_mini_batches = 0",
+        ),
+        ("[ppo]\ngamma = -1.0\n".to_string(), "ppo.gamma = -1"),
+        (
+            format!("[ppo]\nnum_mini_batches = 64\n{}", actor("2", "1")),
+            "ppo.num_mini_batches = 64",
+        ),
+        (
+            "[learner]\ncheckpoint_every = 0\n".to_string(),
+            "learner.checkpoint_every = 0",
+        ),
+        (actor("4", "1").replace("a1", "a2"), "actors[0].robot"),
+    ];
+    for (body, want) in cases {
+        std::fs::write(&path, format!("{base}{body}")).unwrap();
+        let err = Config::load(&path).unwrap_err().to_string();
+        assert!(err.contains(want), "{body}: {err}");
+        assert!(err.contains("odd.toml"), "{err}");
+    }
+    // The same file with sane values loads.
+    std::fs::write(&path, format!("{base}{}", actor("4", "1"))).unwrap();
+    Config::load(&path).unwrap();
+}
