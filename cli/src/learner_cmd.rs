@@ -39,6 +39,8 @@ pub fn learner_options(config: &Config, use_registry: bool) -> anyhow::Result<Le
             .map(|r| runtime::policy_robot(config, r))
             .collect::<anyhow::Result<_>>()?,
         use_registry,
+        steps_per_env: config.rollout.steps_per_env,
+        obs_clip: config.env.obs_clip,
     })
 }
 

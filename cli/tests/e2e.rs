@@ -213,7 +213,8 @@ async fn distributed_training_survives_bad_input_and_dead_processes() {
         })
         .await;
 
-    // 2. Malformed bytes and a chunk holding NaN are rejected and counted; training continues.
+    // 2. Malformed bytes, a chunk holding NaN, one of an unknown robot, one of the wrong step count
+    // and one of huge values are rejected and counted; training continues.
     let publisher = session
         .declare_publisher(keys::rollout(RUN, "a1", "intruder"))
         .await
@@ -230,13 +231,25 @@ async fn distributed_training_survives_bad_input_and_dead_processes() {
         .put(codec::encode(&unknown).unwrap())
         .await
         .unwrap();
+    // Well-formed but odd (these used to end `l3p train`): one step instead of the run's 8, and
+    // finite values large enough to overflow the loss.
+    let mut one_step = RolloutChunk::zeros(RUN, "a1", "intruder", first.iteration, 4, 1, 48, 12);
+    one_step.action_stds.fill(1.0);
+    publisher
+        .put(codec::encode(&one_step).unwrap())
+        .await
+        .unwrap();
+    let mut huge = RolloutChunk::zeros(RUN, "a1", "intruder", first.iteration, 4, 8, 48, 12);
+    huge.action_stds.fill(1.0);
+    huge.observations.fill(3e38);
+    publisher.put(codec::encode(&huge).unwrap()).await.unwrap();
     let after_bad = watch
         .until(
             "rejected chunks to be counted",
             Duration::from_secs(120),
             |r| {
                 r.source == "learner"
-                    && r.values.get("rejected_chunks").copied().unwrap_or(0.0) >= 3.0
+                    && r.values.get("rejected_chunks").copied().unwrap_or(0.0) >= 5.0
             },
         )
         .await;

@@ -81,6 +81,10 @@ pub struct LearnerOptions {
     /// Write checkpoints and deployable policies to the registry as well (and resume from it when
     /// the run directory has no checkpoint).
     pub use_registry: bool,
+    /// The run's chunk contract: steps per env (`[rollout] steps_per_env`) and the observation
+    /// clip (`[env] obs_clip`); a chunk outside it is rejected on arrival.
+    pub steps_per_env: usize,
+    pub obs_clip: f32,
 }
 
 /// Registry name of a run's checkpoints.
@@ -355,6 +359,7 @@ fn update_metrics(record: &mut MetricsRecord, m: &UpdateMetrics) {
         ("recon_mse", m.recon_mse as f64),
         ("recon_baseline_mse", m.recon_baseline_mse as f64),
         ("grad_norm", m.grad_norm as f64),
+        ("skipped_steps", m.skipped_steps as f64),
         ("mean_step_reward", m.mean_reward as f64),
         ("update_seconds", m.update_seconds as f64),
         ("samples", m.samples as f64),
@@ -452,6 +457,7 @@ pub async fn run(
     let chunk_tx = tx.clone();
     let chunk_dims = dims.clone();
     let chunk_run = run.clone();
+    let (chunk_steps, chunk_obs_clip) = (opts.steps_per_env, opts.obs_clip);
     let decode_seconds = Arc::new(std::sync::Mutex::new(0f64));
     let decode_acc = decode_seconds.clone();
     let chunk_task = tokio::spawn(async move {
@@ -473,14 +479,14 @@ pub async fn run(
                         Some(_) if chunk.run != chunk_run => {
                             Err(format!("chunk of run {}", chunk.run))
                         }
-                        Some(&(obs, act)) => {
-                            chunk.validate_dims(obs, act).map_err(|e| e.to_string())
-                        }
+                        Some(&(obs, act)) => chunk
+                            .validate_contract(obs, act, chunk_steps, chunk_obs_clip)
+                            .map_err(|e| e.to_string()),
                     };
                     match checked {
                         Ok(()) => Event::Chunk(Box::new(chunk)),
                         Err(e) => {
-                            warn!(key = %sample.key_expr(), "rejected chunk: {e}");
+                            warn!(key = %sample.key_expr(), actor = %chunk.actor_id, "rejected chunk: {e}");
                             Event::Rejected
                         }
                     }

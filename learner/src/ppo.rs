@@ -197,6 +197,9 @@ pub struct UpdateMetrics {
     pub total_loss: f32,
     /// Global gradient norm before clipping (mean over minibatches).
     pub grad_norm: f32,
+    /// Minibatch steps skipped because their loss or gradient was not finite (parameters and
+    /// optimiser state untouched).
+    pub skipped_steps: usize,
     /// MSE between observations and `R_obs` samples given `h`, on observations of this batch taken
     /// before any gradient step (NaN when there is no `R_obs`).
     pub recon_mse: f32,
@@ -228,7 +231,12 @@ pub struct Ppo {
     lr: f64,
     iteration: u64,
     rng: StdRng,
+    /// Consecutive updates in which every minibatch step was skipped as non-finite.
+    diverged_updates: u32,
 }
+
+/// Updates in a row with no finite step before training stops.
+pub const MAX_DIVERGED_UPDATES: u32 = 3;
 
 impl std::fmt::Debug for Ppo {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -272,6 +280,7 @@ impl Ppo {
             device,
             lr,
             iteration: 0,
+            diverged_updates: 0,
             rng,
         })
     }
@@ -464,6 +473,7 @@ impl Ppo {
         let mut acc = Acc::default();
         for _epoch in 0..cfg.num_learning_epochs {
             for k in 0..cfg.num_mini_batches {
+                let acc_before = acc.clone();
                 let mut obs_t = Vec::with_capacity(self.model.robots.len());
                 obs_t.resize_with(self.model.robots.len(), || None);
                 let mut per_robot = Vec::with_capacity(prepared.len());
@@ -547,19 +557,21 @@ impl Ppo {
                         Some(t) => t.add(weighted),
                     });
                 }
-                acc.kl += mb_kl;
-                self.lr = cfg.adapt_lr(self.lr, mb_kl);
-
                 let loss = loss_total.ok_or_else(|| LearnerError::Batch("no loss".into()))?;
                 let grads = loss.backward();
                 let mut grads = GradientsParams::from_grads(grads, &self.model.net);
                 let norm = clip_global_grad_norm(&self.model.net, &mut grads, cfg.max_grad_norm)?;
-                if !norm.is_finite() {
-                    return Err(LearnerError::NonFinite(format!(
-                        "gradient norm is {norm} at iteration {}",
-                        self.iteration
-                    )));
+                if !(norm.is_finite() && mb_kl.is_finite()) {
+                    // Skip this step: parameters, optimiser state and learning rate untouched,
+                    // the minibatch's losses left out of the metrics.
+                    acc = Acc {
+                        skipped: acc_before.skipped + 1,
+                        ..acc_before
+                    };
+                    continue;
                 }
+                acc.kl += mb_kl;
+                self.lr = cfg.adapt_lr(self.lr, mb_kl);
                 acc.grad_norm += norm;
                 acc.steps += 1;
                 let net = std::mem::replace(&mut self.model.net, placeholder_net());
@@ -568,6 +580,24 @@ impl Ppo {
         }
 
         self.iteration += 1;
+        if acc.steps == 0 {
+            self.diverged_updates += 1;
+            tracing::warn!(
+                iteration = self.iteration,
+                skipped = acc.skipped,
+                "every minibatch step had a non-finite loss or gradient; the policy is unchanged"
+            );
+            if self.diverged_updates >= MAX_DIVERGED_UPDATES {
+                return Err(LearnerError::NonFinite(format!(
+                    "{MAX_DIVERGED_UPDATES} updates in a row had only non-finite losses or \
+                     gradients (last at iteration {}); the last good policy is in the last \
+                     checkpoint",
+                    self.iteration
+                )));
+            }
+        } else {
+            self.diverged_updates = 0;
+        }
         let steps = acc.steps.max(1) as f32;
         let mut std_sum = 0f32;
         let mut std_n = 0usize;
@@ -598,6 +628,7 @@ impl Ppo {
             rec_act_loss: acc.rec_act / steps,
             total_loss: acc.total / steps,
             grad_norm: acc.grad_norm / steps,
+            skipped_steps: acc.skipped,
             recon_mse,
             recon_baseline_mse,
             mean_reward: reward_sum / samples.max(1) as f32,
@@ -654,7 +685,7 @@ impl Ppo {
     }
 }
 
-#[derive(Default)]
+#[derive(Default, Clone)]
 struct Acc {
     kl: f32,
     clip_fraction: f32,
@@ -666,6 +697,8 @@ struct Acc {
     total: f32,
     grad_norm: f32,
     steps: usize,
+    /// Minibatch steps skipped for a non-finite loss or gradient.
+    skipped: usize,
 }
 
 /// Host copies of one robot's minibatch.

@@ -406,3 +406,58 @@ fn bad_batches_are_errors_not_panics() {
             .contains("hint")
     );
 }
+
+/// Observations of 3e38 pass the batch's finiteness checks but overflow the forward pass: every
+/// minibatch step is skipped (parameters, optimiser state and learning rate untouched, counted),
+/// a good batch afterwards trains as usual, and only `MAX_DIVERGED_UPDATES` overflowing updates in
+/// a row stop training.
+#[test]
+fn non_finite_steps_are_skipped_and_only_repeated_divergence_stops_training() {
+    let device = train_device();
+    let model = init_model(
+        Mode::Mlp,
+        small_config(),
+        vec![RobotSpec::new("pm", OBS, ACT)],
+        None,
+        &device,
+    )
+    .unwrap();
+    let cfg = PpoConfig {
+        mode: Mode::Mlp,
+        ..Default::default()
+    };
+    let steps_per_update = cfg.num_learning_epochs * cfg.num_mini_batches;
+    let mut ppo = Ppo::new(cfg, model, device).unwrap();
+    let mut overflowing = RolloutBatch {
+        robots: vec![RobotRollout::zeros("pm", 8, 4, OBS, ACT)],
+    };
+    overflowing.robots[0]
+        .observations
+        .iter_mut()
+        .for_each(|o| *o = 3e38);
+    let mut good = RolloutBatch {
+        robots: vec![RobotRollout::zeros("pm", 8, 4, OBS, ACT)],
+    };
+    for (i, r) in good.robots[0].rewards.iter_mut().enumerate() {
+        *r = (i % 3) as f32 * 0.1;
+    }
+    let before = ppo.export("pm").unwrap().0;
+    let lr = ppo.learning_rate();
+    let m = ppo.update(&overflowing).unwrap();
+    assert_eq!(m.skipped_steps, steps_per_update);
+    assert_eq!(ppo.learning_rate(), lr);
+    assert_eq!(ppo.iteration(), 1);
+    assert!(ppo.export("pm").unwrap().0 == before, "parameters changed");
+    let m = ppo.update(&good).unwrap();
+    assert_eq!(m.skipped_steps, 0);
+    assert!(ppo.export("pm").unwrap().0 != before, "a good batch trains");
+    for k in 1..=l3p_learner::ppo::MAX_DIVERGED_UPDATES {
+        let r = ppo.update(&overflowing);
+        if k < l3p_learner::ppo::MAX_DIVERGED_UPDATES {
+            r.unwrap();
+        } else {
+            let err = r.unwrap_err().to_string();
+            assert!(err.contains("in a row"), "{err}");
+        }
+    }
+}

@@ -42,6 +42,14 @@ pub enum ValidationError {
         index: usize,
         value: f32,
     },
+    #[error("{what}: field `{field}` holds {value} at index {index}: beyond ±{limit}")]
+    OutOfRange {
+        what: &'static str,
+        field: &'static str,
+        index: usize,
+        value: f32,
+        limit: f32,
+    },
     #[error("{what}: field `{field}`: expected {expected}, got {got}")]
     Mismatch {
         what: &'static str,
@@ -110,7 +118,65 @@ fn check_finite(
     }
 }
 
+/// Largest magnitude a rollout chunk's actions, means, stds, rewards and log-probabilities may hold:
+/// far above what a policy or task produces (actions act clipped to ±100 by default, a step's
+/// reward is O(1)), far below where a loss overflows `f32` (a chunk of 3e38s made the gradient
+/// NaN).
+pub const MAX_ROLLOUT_MAGNITUDE: f32 = 1.0e4;
+
+fn check_magnitude(
+    what: &'static str,
+    field: &'static str,
+    values: &[f32],
+    limit: f32,
+) -> Result<(), ValidationError> {
+    match values.iter().position(|v| v.abs() > limit) {
+        None => Ok(()),
+        Some(index) => Err(ValidationError::OutOfRange {
+            what,
+            field,
+            index,
+            value: values[index],
+            limit,
+        }),
+    }
+}
+
 impl RolloutChunk {
+    /// [`RolloutChunk::validate_dims`] plus a run's contract: `steps` steps per env (what the run's
+    /// actors send), observations within ±`obs_clip` (the task clips them there) and every other
+    /// value within ±[`MAX_ROLLOUT_MAGNITUDE`]. A chunk that passes cannot end a PPO update.
+    pub fn validate_contract(
+        &self,
+        obs_dim: usize,
+        action_dim: usize,
+        steps: usize,
+        obs_clip: f32,
+    ) -> Result<(), ValidationError> {
+        const W: &str = "rollout chunk";
+        self.validate_dims(obs_dim, action_dim)?;
+        if self.steps as usize != steps {
+            return Err(ValidationError::Mismatch {
+                what: W,
+                field: "steps",
+                expected: steps.to_string(),
+                got: self.steps.to_string(),
+            });
+        }
+        check_magnitude(W, "observations", &self.observations, obs_clip)?;
+        check_magnitude(W, "last_observations", &self.last_observations, obs_clip)?;
+        for (field, values) in [
+            ("actions", &self.actions),
+            ("log_probs", &self.log_probs),
+            ("action_means", &self.action_means),
+            ("action_stds", &self.action_stds),
+            ("rewards", &self.rewards),
+        ] {
+            check_magnitude(W, field, values, MAX_ROLLOUT_MAGNITUDE)?;
+        }
+        Ok(())
+    }
+
     /// Check the chunk's version, names, declared dimensions against its arrays, and that every value
     /// is finite (and every std positive).
     pub fn validate(&self) -> Result<(), ValidationError> {

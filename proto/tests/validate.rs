@@ -189,3 +189,52 @@ fn episode_means_average_and_split_by_terrain_type() {
     chunk.stage_seconds = vec![("x".into(), 0.0); 17];
     assert!(chunk.validate().is_err());
 }
+
+/// Well-formed but odd chunks that used to end training: another step count than the run's
+/// actors send, and finite values so large that the loss overflows.
+#[test]
+fn the_run_contract_refuses_odd_steps_and_huge_values() {
+    // zeros(.., seq 3, num_envs 2, steps 3, obs 4, act 2)
+    let c = chunk();
+    c.validate_contract(4, 2, 3, 100.0).unwrap();
+    let err = c
+        .validate_contract(4, 2, 24, 100.0)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("`steps`") && err.contains("expected 24, got 3"),
+        "{err}"
+    );
+    let mut huge = chunk();
+    huge.observations[5] = 3e38;
+    let err = huge
+        .validate_contract(4, 2, 3, 100.0)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("`observations`") && err.contains("index 5"),
+        "{err}"
+    );
+    let mut edge = chunk();
+    edge.observations[5] = 100.0;
+    edge.validate_contract(4, 2, 3, 100.0).unwrap();
+    for field in [
+        "actions",
+        "log_probs",
+        "action_means",
+        "action_stds",
+        "rewards",
+    ] {
+        let mut c = chunk();
+        let values = match field {
+            "actions" => &mut c.actions,
+            "log_probs" => &mut c.log_probs,
+            "action_means" => &mut c.action_means,
+            "action_stds" => &mut c.action_stds,
+            _ => &mut c.rewards,
+        };
+        values[1] = 3e38;
+        let err = c.validate_contract(4, 2, 3, 100.0).unwrap_err().to_string();
+        assert!(err.contains(&format!("`{field}`")), "{field}: {err}");
+    }
+}
