@@ -1,7 +1,8 @@
 //! End-to-end over real processes on loopback Zenoh: `l3p registry serve`, `l3p learner` and two
 //! `l3p actor`s (two robots, one shared core). Checks that policy versions advance and metrics reach
 //! an outside subscriber, that malformed chunks are rejected and counted while training goes on, that
-//! killing an actor does not stall training, and that a killed learner resumes from its checkpoint.
+//! killing an actor does not stall training, that a killed learner resumes from its checkpoint, and
+//! that training goes on while the registry is down (uploads wait in a backlog).
 //!
 //! (Process-level tests live in the `cli` crate because Cargo tells only this package's tests where
 //! the `l3p` binary is.)
@@ -44,6 +45,7 @@ eval_samples = 32
 min_actors = 2
 gather_timeout_s = 30.0
 checkpoint_every = 2
+registry_checkpoint_every = 2
 max_iterations = 0
 
 [rollout]
@@ -296,5 +298,22 @@ async fn distributed_training_survives_bad_input_and_dead_processes() {
         resumed.iteration > oldest_allowed && resumed.iteration >= 3,
         "resumed at {} after reaching {before_kill}",
         resumed.iteration
+    );
+
+    // 5. Kill the registry: training goes on past several registry checkpoints (every 2
+    // iterations), the uploads wait in the backlog and the failed attempts are counted.
+    procs.kill("registry");
+    let target = resumed.iteration + 6;
+    let outage = watch
+        .until(
+            "progress without the registry",
+            Duration::from_secs(180),
+            |r| r.source == "learner" && r.iteration >= target,
+        )
+        .await;
+    assert!(
+        outage.values["registry_backlog"] >= 1.0
+            && outage.values["registry_failed_attempts"] >= 1.0,
+        "{outage:?}"
     );
 }

@@ -29,6 +29,7 @@ use tracing::{debug, info, warn};
 use zenoh::Session;
 use zenoh::sample::SampleKind;
 
+use crate::uploader::{RegistryUploader, Upload};
 use crate::{LearnerError, Mode, Ppo, PpoConfig, RolloutBatch, UpdateMetrics};
 
 /// `[learner]` config section: how the daemon gathers data and keeps state.
@@ -86,6 +87,9 @@ pub struct LearnerOptions {
     pub steps_per_env: usize,
     pub obs_clip: f32,
 }
+
+/// How long a stopping learner waits for queued registry uploads.
+const FINAL_UPLOAD_DEADLINE: Duration = Duration::from_secs(60);
 
 /// Registry name of a run's checkpoints.
 pub fn checkpoint_artifact(run: &str) -> String {
@@ -262,18 +266,19 @@ fn publish_weights(
     Ok(entries)
 }
 
-/// Write the checkpoint to the run directory (atomically) and, with a registry, store it there too
-/// along with each robot's deployable policy (`<run>-<robot>`, alias `latest`).
-async fn save_checkpoint(
+/// Write the checkpoint to the run directory (atomically) and, with a registry, queue it there too
+/// along with each robot's deployable policy (`<run>-<robot>`, alias `latest`). The local file is
+/// the source of truth; the registry upload happens in the background and never fails this.
+fn save_checkpoint(
     ppo: &Ppo,
     opts: &LearnerOptions,
-    registry: Option<&l3p_registry::RegistryClient>,
+    registry: Option<&RegistryUploader>,
     record: &MetricsRecord,
 ) -> Result<(), DaemonError> {
     use l3p_registry::{ArtifactKind, PutRequest};
     let bytes = ppo.checkpoint_bytes()?;
     write_atomic(&checkpoint_path(&opts.run_dir), &bytes)?;
-    let Some(client) = registry else {
+    let Some(uploader) = registry else {
         return Ok(());
     };
     let summary = |mut req: PutRequest| {
@@ -291,13 +296,12 @@ async fn save_checkpoint(
             .producer(&format!("learner/{}", opts.run))
             .config(serde_json::json!({ "mode": opts.ppo.mode.as_str(), "policy": opts.policy }))
     };
-    let checkpoint = client
-        .put(summary(PutRequest::new(
-            &checkpoint_artifact(&opts.run),
-            ArtifactKind::Checkpoint,
-            bytes,
-        )))
-        .await?;
+    let checkpoint = summary(PutRequest::new(
+        &checkpoint_artifact(&opts.run),
+        ArtifactKind::Checkpoint,
+        bytes,
+    ));
+    let mut deploys = Vec::with_capacity(opts.robots.len());
     for spec in &opts.robots {
         let (export, config) = ppo.export(&spec.name)?;
         let req = PutRequest::new(
@@ -307,13 +311,14 @@ async fn save_checkpoint(
         )
         .robot(&spec.name)
         .dim("obs_dim", config.obs_dim as u64)
-        .dim("action_dim", config.action_dim as u64)
-        .lineage(
-            l3p_registry::LineageRole::FromCheckpoint,
-            &format!("{}@{}", checkpoint.meta.name, checkpoint.meta.version),
-        );
-        client.put(summary(req)).await?;
+        .dim("action_dim", config.action_dim as u64);
+        deploys.push(summary(req));
     }
+    uploader.submit(Upload {
+        iteration: ppo.iteration(),
+        checkpoint,
+        deploys,
+    });
     Ok(())
 }
 
@@ -400,6 +405,7 @@ pub async fn run(
         _ => None,
     };
     let mut ppo = start_ppo(&opts, from_registry)?;
+    let uploader = registry.map(RegistryUploader::spawn);
     let published = Arc::new(RwLock::new(Published::default()));
     let mut weights = publish_weights(&ppo, &run, &opts.robots, &published)?;
 
@@ -668,6 +674,12 @@ pub async fn run(
         record.insert("actors", live.len() as f64);
         record.insert("dropped_chunks", dropped as f64);
         record.insert("rejected_chunks", rejected as f64);
+        if let Some(u) = &uploader {
+            let stats = u.stats();
+            record.insert("registry_backlog", stats.backlog() as f64);
+            record.insert("registry_failed_attempts", stats.failed_attempts() as f64);
+            record.insert("registry_dropped_uploads", stats.dropped() as f64);
+        }
         // Learner side (decoding chunks, encoding weights) plus the slowest actor's side (fetching
         // weights, encoding and sending its previous chunk).
         let transport = decode + weights_seconds + actor_transport;
@@ -676,11 +688,11 @@ pub async fn run(
         weights_seconds = 0.0;
         emit_metrics(&session, &metrics_file, &record).await?;
         if new_version - last_checkpoint >= opts.daemon.checkpoint_every.max(1) {
-            let to_registry = registry.is_some()
+            let to_registry = uploader.is_some()
                 && new_version - last_registry_checkpoint
                     >= opts.daemon.registry_checkpoint_every.max(1);
-            let target = registry.as_ref().filter(|_| to_registry);
-            save_checkpoint(&ppo, &opts, target, &record).await?;
+            let target = uploader.as_ref().filter(|_| to_registry);
+            save_checkpoint(&ppo, &opts, target, &record)?;
             last_checkpoint = new_version;
             if to_registry {
                 last_registry_checkpoint = new_version;
@@ -699,11 +711,21 @@ pub async fn run(
     // Final checkpoint, whatever stopped us.
     if ppo.iteration() != last_checkpoint
         || !checkpoint_path(&opts.run_dir).exists()
-        || (registry.is_some() && ppo.iteration() != last_registry_checkpoint)
+        || (uploader.is_some() && ppo.iteration() != last_registry_checkpoint)
     {
         let record = MetricsRecord::new(&run, "learner", ppo.iteration(), unix_ms());
-        save_checkpoint(&ppo, &opts, registry.as_ref(), &record).await?;
+        save_checkpoint(&ppo, &opts, uploader.as_ref(), &record)?;
         info!(iteration = ppo.iteration(), "final checkpoint written");
+    }
+    if let Some(uploader) = uploader {
+        let left = uploader.finish(FINAL_UPLOAD_DEADLINE).await;
+        if left > 0 {
+            warn!(
+                left,
+                checkpoint = %checkpoint_path(&opts.run_dir).display(),
+                "registry unreachable: uploads not stored; the local checkpoint has the state"
+            );
+        }
     }
     cancel.cancel();
     chunk_task.abort();

@@ -16,6 +16,8 @@
 //! - [`UpdateMetrics`]: approx KL, clip fraction, explained variance, lr, entropy, mean std, every
 //!   loss, `R_obs` reconstruction MSE, samples/s.
 //! - [`bench`]: the `l3p bench learner` workload (synthetic data, timed update and inference).
+//! - [`uploader::RegistryUploader`]: the daemon's background registry uploads (retried with
+//!   backoff; an outage never stops training).
 //!
 //! Architecture invariant: no rapier; Zenoh is only used by the daemon module (not in this file set).
 
@@ -25,6 +27,7 @@ pub mod gae;
 pub mod ppo;
 pub mod report;
 pub mod storage;
+pub mod uploader;
 
 pub use gae::{compute_gae, explained_variance, normalize};
 pub use ppo::{Mode, Ppo, PpoConfig, Schedule, UpdateMetrics, clip_global_grad_norm, param_ids};
