@@ -32,6 +32,22 @@ pub struct ActorArgs {
     /// Stop after this many chunks (0: until stopped).
     #[arg(long, default_value_t = 0)]
     pub max_chunks: u64,
+    /// Stop when standard input closes: `l3p train` starts its actors with a pipe on stdin, which
+    /// the kernel closes when `l3p train` ends in any way (even SIGKILL), so no actor outlives it.
+    #[arg(long)]
+    pub exit_with_parent: bool,
+}
+
+/// Cancels `cancel` when stdin reaches end of file (or fails).
+fn cancel_when_stdin_closes(cancel: tokio_util::sync::CancellationToken) {
+    std::thread::spawn(move || {
+        use std::io::Read;
+        let mut stdin = std::io::stdin();
+        let mut buf = [0u8; 256];
+        while matches!(stdin.read(&mut buf), Ok(n) if n > 0) {}
+        tracing::warn!("parent process gone (stdin closed): stopping");
+        cancel.cancel();
+    });
 }
 
 pub fn run(args: ActorArgs) -> anyhow::Result<()> {
@@ -60,6 +76,9 @@ pub fn run(args: ActorArgs) -> anyhow::Result<()> {
     };
     runtime::tokio_runtime()?.block_on(async move {
         let cancel = runtime::cancel_on_signal();
+        if args.exit_with_parent {
+            cancel_when_stdin_closes(cancel.clone());
+        }
         let session = net::open_session(&config.zenoh).await?;
         let chunks = l3p_actor::run(session, opts, env, cancel).await?;
         println!("actor stopped after {chunks} chunks");

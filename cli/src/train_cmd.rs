@@ -104,9 +104,15 @@ struct ActorProcess {
     restarts: u32,
 }
 
+/// Starts an actor child with a pipe on its stdin (`--exit-with-parent`): the `Child` keeps the
+/// write end open, and the kernel closes it when this process ends, however it ends.
 fn spawn_actor(args: &[String]) -> anyhow::Result<Child> {
     let exe = std::env::current_exe()?;
-    Ok(Command::new(exe).args(args).stdin(Stdio::null()).spawn()?)
+    Ok(Command::new(exe)
+        .args(args)
+        .arg("--exit-with-parent")
+        .stdin(Stdio::piped())
+        .spawn()?)
 }
 
 pub fn run(args: TrainArgs) -> anyhow::Result<()> {

@@ -123,3 +123,83 @@ envs = 4
             || !metrics.contains("episode_return")
     );
 }
+
+/// Pids of the processes whose parent is `parent` and whose command line holds `needle`.
+#[cfg(target_os = "linux")]
+fn children_with(parent: u32, needle: &str) -> Vec<u32> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+        // `pid (comm) state ppid ...`: the fields after the last ')'.
+        let ppid = stat
+            .rsplit_once(')')
+            .and_then(|(_, rest)| rest.split_whitespace().nth(1))
+            .and_then(|p| p.parse::<u32>().ok());
+        let cmdline = std::fs::read(format!("/proc/{pid}/cmdline")).unwrap_or_default();
+        if ppid == Some(parent) && String::from_utf8_lossy(&cmdline).contains(needle) {
+            out.push(pid);
+        }
+    }
+    out
+}
+
+/// Whether `pid` still runs (a zombie has exited).
+#[cfg(target_os = "linux")]
+fn running(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat"))
+        .ok()
+        .and_then(|s| {
+            s.rsplit_once(')')
+                .and_then(|(_, rest)| rest.split_whitespace().next().map(|st| st != "Z"))
+        })
+        .unwrap_or(false)
+}
+
+/// SIGKILL of `l3p train` leaves no actor behind: its actors watch the stdin pipe it holds.
+#[cfg(target_os = "linux")]
+#[test]
+fn killed_train_leaves_no_orphan_actor() {
+    use std::time::{Duration, Instant};
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("run.toml");
+    std::fs::write(
+        &config,
+        "[run]\nname = \"orphan\"\n[env]\nheight_scan = false\n[env.terrain]\npreset = \"flat\"\n\
+         [model]\nencoder_hidden = [16]\ncore_hidden = [16]\ncritic_hidden = [16]\n\
+         [model.recovery]\nobs_hidden = [16]\ndiffusion_steps = 5\neval_samples = 8\n\
+         [learner]\nmax_iterations = 0\n[rollout]\nsteps_per_env = 4\n\
+         [[actors]]\nrobot = \"a1\"\nenvs = 2\n",
+    )
+    .unwrap();
+    let mut train = Command::new(env!("CARGO_BIN_EXE_l3p"))
+        .args(["train", config.to_str().unwrap(), "--quiet", "--data-dir"])
+        .arg(dir.path().join("data"))
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let actors = loop {
+        let found = children_with(train.id(), "--exit-with-parent");
+        if !found.is_empty() {
+            break found;
+        }
+        assert!(Instant::now() < deadline, "no actor started");
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    // Let the actor get going (connected, collecting) before the parent dies.
+    std::thread::sleep(Duration::from_secs(2));
+    train.kill().unwrap();
+    train.wait().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while actors.iter().any(|&pid| running(pid)) {
+        assert!(
+            Instant::now() < deadline,
+            "actor {actors:?} still running 30 s after its parent was killed"
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
+}
