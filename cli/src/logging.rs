@@ -1,4 +1,6 @@
-//! `tracing` set-up: logs go to stderr, filtered by `RUST_LOG` (default `info`).
+//! `tracing` set-up: logs go to stderr, filtered by `RUST_LOG` (default: l3p's `info`, Zenoh's
+//! `warn` — its session INFO lines, such as the endpoints it can be reached at, are noise on every
+//! call of a one-shot command).
 
 use tracing_subscriber::EnvFilter;
 
@@ -18,7 +20,9 @@ pub fn init() {
         }
         default_hook(info);
     }));
-    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"));
+    let filter = EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+        EnvFilter::new("info,zenoh=warn,zenoh_transport=warn,zenoh_link_tcp=warn")
+    });
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)

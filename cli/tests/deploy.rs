@@ -10,12 +10,22 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use common::{Procs, log_tails};
+use common::{Procs, log_tails, wait_for_port};
 use l3p_proto::{ControlMode, DeployStatus, RobotCommand, codec, keys};
 use l3p_registry::net::{ZenohSettings, free_loopback_port, open_session};
 
 fn trained_policy() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session1/policy/policy.safetensors")
+}
+
+/// A free loopback port other than `taken`, and its endpoint, for the controller to listen on.
+fn deploy_endpoint(taken: u16) -> (u16, String) {
+    loop {
+        let port = free_loopback_port().unwrap();
+        if port != taken {
+            return (port, format!("tcp/127.0.0.1:{port}"));
+        }
+    }
 }
 
 /// What the test saw on the robot's keys, in arrival order.
@@ -159,7 +169,28 @@ async fn trained_policy_walks_the_sim_robot_and_stale_state_damps_until_resume()
     let mut procs = Procs(Vec::new());
     let endpoint = start_registry(&mut procs, d, &[("a1-walk", &trained_policy())]);
     let port: u16 = endpoint.rsplit(':').next().unwrap().parse().unwrap();
-    let session = open_session(&ZenohSettings::loopback(None, &[port]))
+    // The controller listens (nothing listens unless told to); the robot, the operator and this
+    // test connect to it.
+    let (deploy_port, deploy_ep) = deploy_endpoint(port);
+    procs.spawn(
+        "deploy",
+        &[
+            "deploy",
+            "--robot",
+            "a1",
+            "--robot-id",
+            "dog",
+            "--policy",
+            "a1-walk@latest",
+            "--connect",
+            &endpoint,
+            "--listen",
+            &deploy_ep,
+        ],
+        d,
+    );
+    wait_for_port(deploy_port, Duration::from_secs(60), "the controller", d);
+    let session = open_session(&ZenohSettings::loopback(None, &[port, deploy_port]))
         .await
         .unwrap();
     let tap = Tap::new(&session, "dog").await;
@@ -176,24 +207,9 @@ async fn trained_policy_walks_the_sim_robot_and_stale_state_damps_until_resume()
         "--duration",
         "9",
         "--connect",
-        &endpoint,
+        &deploy_ep,
     ];
     procs.spawn_split("sim", &sim_args, d);
-    procs.spawn(
-        "deploy",
-        &[
-            "deploy",
-            "--robot",
-            "a1",
-            "--robot-id",
-            "dog",
-            "--policy",
-            "a1-walk@latest",
-            "--connect",
-            &endpoint,
-        ],
-        d,
-    );
 
     // The sim-robot runs 9 s and exits; its summary says how the robot moved under the policy.
     let exit = tokio::task::block_in_place(|| procs.wait_exit("sim", Duration::from_secs(60)));
@@ -302,7 +318,7 @@ async fn trained_policy_walks_the_sim_robot_and_stale_state_damps_until_resume()
             "dog",
             "resume",
             "--connect",
-            &endpoint,
+            &deploy_ep,
         ])
     });
     assert!(
@@ -369,7 +385,6 @@ async fn nan_policy_is_damped_and_wrong_robot_is_refused_before_any_command() {
     let session = open_session(&ZenohSettings::loopback(None, &[port]))
         .await
         .unwrap();
-    let tap = Tap::new(&session, "pup").await;
     let wrong = Tap::new(&session, "other").await;
     tokio::time::sleep(Duration::from_millis(500)).await;
 
@@ -398,19 +413,7 @@ async fn nan_policy_is_damped_and_wrong_robot_is_refused_before_any_command() {
     assert!(wrong.events().is_empty(), "{:?}", wrong.events());
 
     // The NaN policy: start-up as usual, then damping on its first policy tick.
-    procs.spawn(
-        "sim",
-        &[
-            "sim-robot",
-            "--robot",
-            "a1",
-            "--robot-id",
-            "pup",
-            "--connect",
-            &endpoint,
-        ],
-        d,
-    );
+    let (deploy_port, deploy_ep) = deploy_endpoint(port);
     procs.spawn(
         "deploy",
         &[
@@ -423,6 +426,27 @@ async fn nan_policy_is_damped_and_wrong_robot_is_refused_before_any_command() {
             "a1-nan@latest",
             "--connect",
             &endpoint,
+            "--listen",
+            &deploy_ep,
+        ],
+        d,
+    );
+    wait_for_port(deploy_port, Duration::from_secs(60), "the controller", d);
+    let robot_side = open_session(&ZenohSettings::loopback(None, &[deploy_port]))
+        .await
+        .unwrap();
+    let tap = Tap::new(&robot_side, "pup").await;
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    procs.spawn(
+        "sim",
+        &[
+            "sim-robot",
+            "--robot",
+            "a1",
+            "--robot-id",
+            "pup",
+            "--connect",
+            &deploy_ep,
         ],
         d,
     );

@@ -12,12 +12,13 @@ use serde::{Deserialize, Serialize};
 pub struct ZenohSettings {
     /// `peer` (LAN, default) or `client` (through a `zenohd` router).
     pub mode: String,
-    /// Endpoints to listen on, e.g. `tcp/127.0.0.1:7447`. Empty: Zenoh's default.
+    /// Endpoints to listen on, e.g. `tcp/127.0.0.1:7447`. Empty: no listener (a process that only
+    /// connects opens no port); Zenoh's own default would listen on every interface.
     pub listen: Vec<String>,
     /// Endpoints to connect to (routers or peers).
     pub connect: Vec<String>,
-    /// Multicast scouting (automatic discovery on the LAN). Off in local mode and tests, which connect
-    /// explicitly over loopback so that two runs on one machine never see each other.
+    /// Multicast scouting (automatic discovery on the LAN). Off by default: processes find each other
+    /// through `listen`/`connect` only, so nothing joins a LAN unless configured to.
     pub multicast_scouting: bool,
     /// Optional Zenoh JSON5 config file loaded first (TLS, ACL, ...); the fields above override it.
     pub config_file: Option<PathBuf>,
@@ -29,7 +30,7 @@ impl Default for ZenohSettings {
             mode: "peer".into(),
             listen: Vec::new(),
             connect: Vec::new(),
-            multicast_scouting: true,
+            multicast_scouting: false,
             config_file: None,
         }
     }
@@ -64,9 +65,8 @@ impl ZenohSettings {
                 .map_err(|e| NetError::Config(format!("{key}: {e}")))
         };
         set("mode", json(&self.mode))?;
-        if !self.listen.is_empty() {
-            set("listen/endpoints", json(&self.listen))?;
-        }
+        // Always set: an empty list means no listener, where Zenoh's default is every interface.
+        set("listen/endpoints", json(&self.listen))?;
         if !self.connect.is_empty() {
             set("connect/endpoints", json(&self.connect))?;
         }
@@ -124,5 +124,81 @@ mod tests {
             .unwrap();
         let listen = config.get_json("listen/endpoints").unwrap();
         assert!(listen.contains("127.0.0.1:0"), "{listen}");
+    }
+
+    #[test]
+    fn default_settings_open_no_listener_and_do_not_scout() {
+        let config = ZenohSettings::default().to_zenoh_config().unwrap();
+        let listen = config.get_json("listen/endpoints").unwrap();
+        assert!(!listen.contains("tcp"), "{listen}");
+        let scouting = config.get_json("scouting/multicast/enabled").unwrap();
+        assert_eq!(scouting, "false");
+    }
+
+    /// A connect-only session (what actors and one-shot commands open) listens on no port.
+    #[cfg(target_os = "linux")]
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_connect_only_session_listens_nowhere() {
+        let before = listening_inodes();
+        let settings = ZenohSettings {
+            connect: vec![format!("tcp/127.0.0.1:{}", free_loopback_port().unwrap())],
+            ..ZenohSettings::default()
+        };
+        let session = open_session(&settings).await.unwrap();
+        let mine = own_socket_inodes();
+        let new_listeners: Vec<_> = listening_inodes()
+            .into_iter()
+            .filter(|i| !before.contains(i) && mine.contains(i))
+            .collect();
+        assert!(new_listeners.is_empty(), "{new_listeners:?}");
+        session.close().await.unwrap();
+        // The probe does see a listener when there is one.
+        let before = listening_inodes();
+        let listening = open_session(&ZenohSettings::loopback(None, &[]))
+            .await
+            .unwrap();
+        let mine = own_socket_inodes();
+        assert!(
+            listening_inodes()
+                .iter()
+                .any(|i| !before.contains(i) && mine.contains(i))
+        );
+        listening.close().await.unwrap();
+    }
+
+    /// Socket inodes in LISTEN state (TCP, v4 and v6).
+    #[cfg(target_os = "linux")]
+    fn listening_inodes() -> Vec<String> {
+        ["/proc/net/tcp", "/proc/net/tcp6"]
+            .iter()
+            .filter_map(|p| std::fs::read_to_string(p).ok())
+            .flat_map(|t| {
+                t.lines()
+                    .skip(1)
+                    .filter_map(|l| {
+                        let f: Vec<&str> = l.split_whitespace().collect();
+                        (f.get(3) == Some(&"0A")).then(|| f.get(9).map(|s| s.to_string()))?
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    }
+
+    /// Inodes of this process's sockets.
+    #[cfg(target_os = "linux")]
+    fn own_socket_inodes() -> Vec<String> {
+        std::fs::read_dir("/proc/self/fd")
+            .map(|d| {
+                d.flatten()
+                    .filter_map(|e| std::fs::read_link(e.path()).ok())
+                    .filter_map(|l| {
+                        let l = l.to_string_lossy().to_string();
+                        l.strip_prefix("socket:[")
+                            .and_then(|r| r.strip_suffix(']'))
+                            .map(str::to_string)
+                    })
+                    .collect()
+            })
+            .unwrap_or_default()
     }
 }
