@@ -372,8 +372,9 @@ pub struct TaskEnvState {
     pub command: Command,
     /// The action applied in the last step (observation `last_action`; IsaacLab `action`).
     pub last_action: [f32; NUM_JOINTS],
-    /// The policy's mean action in the last step (what `action_rate_l2` differences; equals
-    /// `last_action` when the caller gives no means).
+    /// The policy's mean action in the last step after the action filter (what `action_rate_l2`
+    /// differences: the deployed policy's target path; equals `last_action` when the caller gives
+    /// no means).
     pub last_mean_action: [f32; NUM_JOINTS],
     /// The mean action one step before `last_mean_action` (for `action_smoothness_l2`).
     pub prev_mean_action: [f32; NUM_JOINTS],
@@ -727,8 +728,14 @@ impl Task {
         terrain: &Terrain,
     ) -> StepResult {
         let c = self.spec.action_clip;
+        let alpha = self.spec.action_filter_alpha;
+        // The mean's path through the action filter, as the deployed policy's targets move (the
+        // applied `action` is already filtered).
         let smooth: [f32; NUM_JOINTS] = match mean {
-            Some(m) => std::array::from_fn(|j| clip_action(m[j], c)),
+            Some(m) => std::array::from_fn(|j| {
+                let prev = env.last_mean_action[j];
+                prev + alpha * (clip_action(m[j], c) - prev)
+            }),
             None => *action,
         };
         let mut out = StepResult::default();
@@ -1325,6 +1332,27 @@ mod tests {
         let r3 = task.evaluate(&mut env, &st, &[0.5; 12], &terrain);
         let want = w * 12.0 * (0.5f32 - 0.2).powi(2) * dt;
         assert!((r3.terms[RewardTerm::ActionRateL2 as usize] - want).abs() < 1e-6);
+    }
+
+    #[test]
+    fn with_an_action_filter_the_rate_penalty_follows_the_filtered_mean() {
+        let (mut task, terrain) = flat_task("a1");
+        task.spec.action_filter_alpha = 0.5;
+        let w = task.spec.rewards.action_rate_l2;
+        let dt = 0.02;
+        let mut rng = StdRng::seed_from_u64(4);
+        let st = standing_state();
+        let mut env = TaskEnvState::new();
+        task.reset_env(&mut env, &st, [0.0; 3], &mut rng);
+        // A mean step 0 → 0.4 reaches the targets as 0.2, then 0.3: rates 0.2² and 0.1².
+        let mean = [0.4; 12];
+        let r1 = task.evaluate_with_mean(&mut env, &st, &[0.0; 12], Some(&mean), &terrain);
+        let want = w * 12.0 * 0.04 * dt;
+        assert!((r1.terms[RewardTerm::ActionRateL2 as usize] - want).abs() < 1e-7);
+        let r2 = task.evaluate_with_mean(&mut env, &st, &[0.0; 12], Some(&mean), &terrain);
+        let want = w * 12.0 * 0.01 * dt;
+        assert!((r2.terms[RewardTerm::ActionRateL2 as usize] - want).abs() < 1e-7);
+        assert!((env.last_mean_action[0] - 0.3).abs() < 1e-6);
     }
 
     #[test]
