@@ -461,3 +461,50 @@ fn non_finite_steps_are_skipped_and_only_repeated_divergence_stops_training() {
         }
     }
 }
+
+/// The adaptive learning rate sees each update's own step: with one minibatch per update the KL is
+/// taken before the step, so it is zero even when the batch comes from an older policy (a lagged
+/// chunk), where the KL to the behaviour policy would count the previous update's step.
+#[test]
+fn the_kl_of_an_update_is_measured_from_its_own_start_not_the_behaviour_policy() {
+    let device = train_device();
+    let model = init_model(
+        Mode::Mlp,
+        small_config(),
+        vec![RobotSpec::new("pm", OBS, ACT)],
+        None,
+        &device,
+    )
+    .unwrap();
+    let mut ppo = Ppo::new(
+        PpoConfig {
+            mode: Mode::Mlp,
+            num_learning_epochs: 1,
+            num_mini_batches: 1,
+            schedule: Schedule::Fixed,
+            learning_rate: 0.05,
+            ..Default::default()
+        },
+        model,
+        device,
+    )
+    .unwrap();
+    let mut batch = RolloutBatch {
+        robots: vec![RobotRollout::zeros("pm", 8, 4, OBS, ACT)],
+    };
+    let r = &mut batch.robots[0];
+    for (i, v) in r.observations.iter_mut().enumerate() {
+        *v = ((i * 7) % 11) as f32 * 0.1 - 0.5;
+    }
+    for (i, v) in r.rewards.iter_mut().enumerate() {
+        *v = (i % 5) as f32 * 0.2;
+    }
+    r.action_stds.fill(1.0);
+    let before = ppo.export("pm").unwrap().0;
+    let first = ppo.update(&batch).unwrap();
+    assert!(first.approx_kl.abs() < 1e-4, "{}", first.approx_kl);
+    assert!(ppo.export("pm").unwrap().0 != before, "the first update moved the policy");
+    // The same data again, now one version behind the learner: still the update's own step only.
+    let second = ppo.update(&batch).unwrap();
+    assert!(second.approx_kl.abs() < 1e-4, "{}", second.approx_kl);
+}
