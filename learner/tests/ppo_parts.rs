@@ -467,20 +467,10 @@ fn non_finite_steps_are_skipped_and_only_repeated_divergence_stops_training() {
 /// chunk), where the KL to the behaviour policy would count the previous update's step.
 #[test]
 fn the_kl_of_an_update_is_measured_from_its_own_start_not_the_behaviour_policy() {
-    for mode in [Mode::Mlp, Mode::L3p] {
-        kl_from_update_start(mode, 1.0);
-        kl_from_update_start(mode, 2.0);
-    }
-}
-
-fn kl_from_update_start(mode: Mode, init_std: f32) {
     let device = train_device();
     let model = init_model(
-        mode,
-        PolicyConfig {
-            init_std,
-            ..small_config()
-        },
+        Mode::Mlp,
+        small_config(),
         vec![RobotSpec::new("pm", OBS, ACT)],
         None,
         &device,
@@ -488,7 +478,7 @@ fn kl_from_update_start(mode: Mode, init_std: f32) {
     .unwrap();
     let mut ppo = Ppo::new(
         PpoConfig {
-            mode,
+            mode: Mode::Mlp,
             num_learning_epochs: 1,
             num_mini_batches: 1,
             schedule: Schedule::Fixed,
@@ -512,20 +502,9 @@ fn kl_from_update_start(mode: Mode, init_std: f32) {
     r.action_stds.fill(1.0);
     let before = ppo.export("pm").unwrap().0;
     let first = ppo.update(&batch).unwrap();
-    assert!(
-        first.approx_kl.abs() < 1e-4,
-        "{mode:?}: {}",
-        first.approx_kl
-    );
-    assert!(
-        ppo.export("pm").unwrap().0 != before,
-        "the first update moved the policy"
-    );
+    assert!(first.approx_kl.abs() < 1e-4, "{}", first.approx_kl);
+    assert!(ppo.export("pm").unwrap().0 != before, "the first update moved the policy");
     // The same data again, now one version behind the learner: still the update's own step only.
     let second = ppo.update(&batch).unwrap();
-    assert!(
-        second.approx_kl.abs() < 1e-4,
-        "{mode:?}: {}",
-        second.approx_kl
-    );
+    assert!(second.approx_kl.abs() < 1e-4, "{}", second.approx_kl);
 }
