@@ -10,8 +10,8 @@
 //! 3. `R_obs` reconstruction error on observations not trained on yet (the fresh batch);
 //! 4. one random permutation per robot, reused by every epoch (rsl_rl); `epochs × minibatches`:
 //!    each minibatch takes the k-th slice of every robot's permutation, runs every robot through its
-//!    adapters and the shared core, computes the KL to the policy at the start of the update (the
-//!    behaviour policy without lag, as rsl_rl) and adapts the learning rate *before* the step, the clipped surrogate, the clipped value loss, the entropy bonus and
+//!    adapters and the shared core, computes the KL to the behaviour policy and adapts the learning
+//!    rate *before* the step, the clipped surrogate, the clipped value loss, the entropy bonus and
 //!    `λ (L_rec_obs + L_rec_act)`, back-propagates, clips the global gradient norm and steps Adam.
 
 use std::time::Instant;
@@ -219,9 +219,6 @@ struct Prepared {
     adv: Vec<f32>,
     ret: Vec<f32>,
     values: Vec<f32>,
-    /// The policy at the start of this update: mean `[n, act]` and std (per sample, `[n, act]`).
-    start_mu: Vec<f32>,
-    start_sigma: Vec<f32>,
     perm: Vec<usize>,
 }
 
@@ -395,26 +392,6 @@ impl Ppo {
         Ok(tensor_to_vec(net.robots[robot].value(x))?)
     }
 
-    /// Mean `[n, act]` and std (repeated per sample, `[n, act]`) of robot `robot`'s policy under
-    /// `net` on `obs`.
-    fn policy_stats(
-        &self,
-        net: &PolicyNet,
-        robot: usize,
-        obs: &[f32],
-        obs_dim: usize,
-    ) -> Result<(Vec<f32>, Vec<f32>), LearnerError> {
-        let n = obs.len() / obs_dim;
-        let x = self.tensor2(obs.to_vec(), n, obs_dim).inner();
-        let out = net
-            .actor(robot, x)
-            .ok_or_else(|| LearnerError::Batch("missing actor output".into()))?;
-        let mu = tensor_to_vec(out.mean)?;
-        let std = tensor_to_vec(out.std)?;
-        let sigma = std.iter().copied().cycle().take(mu.len()).collect();
-        Ok((mu, sigma))
-    }
-
     /// One PPO update on `batch` (see the module docs for the order of operations).
     pub fn update(&mut self, batch: &RolloutBatch) -> Result<UpdateMetrics, LearnerError> {
         let start = Instant::now();
@@ -470,12 +447,6 @@ impl Ppo {
                 cfg.lam,
             );
             normalize(&mut adv);
-            // The adaptive learning rate measures this update's own step: KL against the policy
-            // at its start. That is the behaviour policy when `max_policy_lag` = 0; with lag the
-            // behaviour policy is older, and its KL would count earlier updates' steps too (which
-            // drove the learning rate down 2-5x in lagged runs).
-            let (start_mu, start_sigma) =
-                self.policy_stats(&net_eval, i, &r.observations, r.obs_dim)?;
             ev_values.extend_from_slice(&values);
             ev_returns.extend_from_slice(&ret);
             let mut perm: Vec<usize> = (0..r.samples()).collect();
@@ -488,8 +459,6 @@ impl Ppo {
                 adv,
                 ret,
                 values,
-                start_mu,
-                start_sigma,
                 perm,
             });
         }
@@ -529,16 +498,16 @@ impl Ppo {
                     let heads = &self.model.net.robots[p.robot];
                     let actions = self.tensor2(g.actions, mb, p.act_dim);
                     let old_logp = self.tensor1(g.old_logp);
-                    let start_mu = self.tensor2(g.start_mu, mb, p.act_dim);
-                    let start_sigma = self.tensor2(g.start_sigma, mb, p.act_dim);
+                    let old_mu = self.tensor2(g.old_mu, mb, p.act_dim);
+                    let old_sigma = self.tensor2(g.old_sigma, mb, p.act_dim);
                     let adv = self.tensor1(g.adv);
                     let ret = self.tensor1(g.ret);
                     let old_v = self.tensor1(g.old_v);
 
-                    // KL(update start ‖ new) as rsl_rl's KL(old ‖ new), no gradient.
+                    // KL(old ‖ new) as rsl_rl, no gradient.
                     let mu = out.mean.clone().detach();
                     let sigma = out.std.clone().detach();
-                    let kl = approx_kl(mu, sigma, start_mu, start_sigma);
+                    let kl = approx_kl(mu, sigma, old_mu, old_sigma);
                     let kl = scalar(kl)?;
                     mb_kl += w * kl;
 
@@ -737,8 +706,8 @@ struct Gathered {
     obs: Vec<f32>,
     actions: Vec<f32>,
     old_logp: Vec<f32>,
-    start_mu: Vec<f32>,
-    start_sigma: Vec<f32>,
+    old_mu: Vec<f32>,
+    old_sigma: Vec<f32>,
     adv: Vec<f32>,
     ret: Vec<f32>,
     old_v: Vec<f32>,
@@ -759,8 +728,8 @@ impl Gathered {
             obs: rows(&r.observations, od),
             actions: rows(&r.actions, ad),
             old_logp: pick(&r.log_probs),
-            start_mu: rows(&p.start_mu, ad),
-            start_sigma: rows(&p.start_sigma, ad),
+            old_mu: rows(&r.action_means, ad),
+            old_sigma: rows(&r.action_stds, ad),
             adv: pick(&p.adv),
             ret: pick(&p.ret),
             old_v: pick(&p.values),
