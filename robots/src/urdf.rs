@@ -104,9 +104,29 @@ pub fn load_urdf_str(text: &str, file: &str) -> Result<RobotModel, UrdfError> {
 
 const SKIPPED_TOP_LEVEL: [&str; 2] = ["gazebo", "transmission"];
 
+/// Largest URDF accepted (bytes): vendor files are 10–500 KB; the limit only bounds the work a
+/// hostile file can cause.
+pub const MAX_URDF_BYTES: usize = 16 * 1024 * 1024;
+/// Deepest element nesting accepted: URDF needs 5 (`robot/link/visual/geometry/mesh`), and the
+/// serde parser behind `urdf-rs` recurses once per level (20,000 levels overflowed its stack).
+pub const MAX_URDF_DEPTH: usize = 32;
+/// Largest magnitude of any number in a URDF (masses in kg, lengths in m, limits): far above any
+/// robot, far below where `f32` overflows (a mass of 1e300 became infinity).
+pub const MAX_URDF_MAGNITUDE: f64 = 1.0e6;
+
 /// Validates attributes (with line numbers) and rewrites the document without the parts urdf-rs
 /// trips on. Returns the cleaned XML text.
 fn prepass(text: &str, file: &str) -> Result<String, UrdfError> {
+    if text.len() > MAX_URDF_BYTES {
+        return Err(UrdfError::Xml {
+            file: file.to_string(),
+            line: 0,
+            message: format!(
+                "{} bytes is more than the {MAX_URDF_BYTES} a URDF may have",
+                text.len()
+            ),
+        });
+    }
     let config = ParserConfig::new()
         .ignore_comments(true)
         .trim_whitespace(true);
@@ -132,6 +152,15 @@ fn prepass(text: &str, file: &str) -> Result<String, UrdfError> {
                 name, attributes, ..
             } => {
                 let local = name.local_name.clone();
+                if stack.len() + skip_depth >= MAX_URDF_DEPTH {
+                    return Err(UrdfError::Xml {
+                        file: file.to_string(),
+                        line,
+                        message: format!(
+                            "<{local}> is nested more than {MAX_URDF_DEPTH} elements deep"
+                        ),
+                    });
+                }
                 if skip_depth > 0 {
                     skip_depth += 1;
                     continue;
@@ -190,8 +219,12 @@ fn prepass(text: &str, file: &str) -> Result<String, UrdfError> {
 
 fn parse_floats(s: &str) -> Option<Vec<f64>> {
     s.split_whitespace()
-        .map(|t| t.parse::<f64>().ok().filter(|v| v.is_finite()))
+        .map(|t| t.parse::<f64>().ok().filter(|v| plausible_magnitude(*v)))
         .collect()
+}
+
+fn plausible_magnitude(v: f64) -> bool {
+    v.is_finite() && v.abs() <= MAX_URDF_MAGNITUDE
 }
 
 fn validate<'a>(
@@ -222,9 +255,18 @@ fn validate<'a>(
             None if required => Err(err(format!("missing attribute `{k}`"))),
             None => Ok(None),
             Some(v) => match v.trim().parse::<f64>() {
-                Ok(f) if f.is_finite() => Ok(Some(f)),
+                Ok(f) if plausible_magnitude(f) => Ok(Some(f)),
+                Ok(f) if f.is_finite() => Err(err(format!(
+                    "attribute `{k}`=\"{v}\" is beyond ±{MAX_URDF_MAGNITUDE:e}"
+                ))),
                 _ => Err(err(format!("attribute `{k}`=\"{v}\" is not a number"))),
             },
+        }
+    };
+    let non_negative = |k: &str, v: Option<f64>| -> Result<(), UrdfError> {
+        match v {
+            Some(v) if v < 0.0 => Err(err(format!("negative {k} {v}"))),
+            _ => Ok(()),
         }
     };
     match element {
@@ -262,24 +304,41 @@ fn validate<'a>(
             }
         }
         "inertia" => {
-            for k in ["ixx", "ixy", "ixz", "iyy", "iyz", "izz"] {
-                num(k, false)?;
+            let mut m = [0.0; 6];
+            for (v, k) in m.iter_mut().zip(["ixx", "ixy", "ixz", "iyy", "iyz", "izz"]) {
+                *v = num(k, false)?.unwrap_or(0.0);
+            }
+            if let Some(why) = implausible_inertia(m) {
+                return Err(err(why));
             }
         }
         "limit" if parent == "joint" => {
-            for k in ["lower", "upper", "effort", "velocity"] {
-                num(k, false)?;
+            for k in ["effort", "velocity"] {
+                if let Some(v) = num(k, false)?
+                    && v < 0.0
+                {
+                    return Err(err(format!("negative {k} {v}")));
+                }
+            }
+            if let (Some(lo), Some(hi)) = (num("lower", false)?, num("upper", false)?)
+                && lo > hi
+            {
+                return Err(err(format!("lower limit {lo} is above upper limit {hi}")));
             }
         }
         "box" => {
-            vec3("size", true)?;
+            if let Some(size) = vec3("size", true)?
+                && size.iter().any(|v| *v < 0.0)
+            {
+                return Err(err(format!("negative box size {size:?}")));
+            }
         }
         "sphere" => {
-            num("radius", true)?;
+            non_negative("radius", num("radius", true)?)?;
         }
         "cylinder" | "capsule" => {
-            num("radius", true)?;
-            num("length", true)?;
+            non_negative("radius", num("radius", true)?)?;
+            non_negative("length", num("length", true)?)?;
         }
         "mesh" => {
             if attr("filename").is_none() {
@@ -290,6 +349,33 @@ fn validate<'a>(
         _ => {}
     }
     Ok(())
+}
+
+/// Why an inertia tensor `[ixx, ixy, ixz, iyy, iyz, izz]` cannot be a body's, if it cannot: it
+/// must be positive semi-definite (leading minors ≥ 0) and its principal moments must satisfy the
+/// triangle inequality (checked on the diagonal, which bounds them for a physical body).
+fn implausible_inertia([ixx, ixy, ixz, iyy, iyz, izz]: [f64; 6]) -> Option<String> {
+    // Relative slack for rounding in vendor files.
+    let scale = ixx.abs().max(iyy.abs()).max(izz.abs()).max(1e-12);
+    let eps = 1e-9 * scale;
+    if ixx < -eps || iyy < -eps || izz < -eps {
+        return Some(format!(
+            "negative moment of inertia (ixx {ixx}, iyy {iyy}, izz {izz})"
+        ));
+    }
+    let minor2 = ixx * iyy - ixy * ixy;
+    let det = ixx * (iyy * izz - iyz * iyz) - ixy * (ixy * izz - iyz * ixz)
+        + ixz * (ixy * iyz - iyy * ixz);
+    if minor2 < -1e-9 * scale * scale || det < -1e-9 * scale * scale * scale {
+        return Some("inertia tensor is not positive semi-definite".into());
+    }
+    let slack = 1e-6 * scale;
+    if ixx + iyy + slack < izz || iyy + izz + slack < ixx || izz + ixx + slack < iyy {
+        return Some(format!(
+            "moments of inertia break the triangle inequality (ixx {ixx}, iyy {iyy}, izz {izz})"
+        ));
+    }
+    None
 }
 
 fn v3(v: &urdf_rs::Vec3) -> Vec3 {

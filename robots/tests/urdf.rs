@@ -210,3 +210,48 @@ fn broken_files_name_file_element_and_line() {
     let e = load_urdf_file("/nonexistent/robot.urdf").unwrap_err();
     assert!(e.to_string().contains("/nonexistent/robot.urdf"), "{e}");
 }
+
+/// Hostile or absurd files (each accepted or crashing the loader before): a clear error naming
+/// the element, never an abort.
+#[test]
+fn absurd_values_and_deep_nesting_are_refused_with_the_element_named() {
+    let link = |inertial: &str| {
+        format!(
+            "<robot name=\"r\">\n<link name=\"a\">\n<inertial>\n{inertial}\n</inertial>\n</link>\n</robot>"
+        )
+    };
+    let inertia = |ixx: &str, iyy: &str, izz: &str, ixy: &str| {
+        link(&format!(
+            "<mass value=\"1\"/><inertia ixx=\"{ixx}\" ixy=\"{ixy}\" ixz=\"0\" iyy=\"{iyy}\" iyz=\"0\" izz=\"{izz}\"/>"
+        ))
+    };
+    let cases = [
+        (link("<mass value=\"1e300\"/>"), "<mass>"),
+        (inertia("1e38", "1", "1", "0"), "<inertia>"),
+        (inertia("-0.1", "0.1", "0.1", "0"), "negative moment"),
+        (inertia("0.1", "0.1", "0.5", "0"), "triangle inequality"),
+        (inertia("0.1", "0.1", "0.1", "0.5"), "positive semi-definite"),
+        (
+            "<robot name=\"r\"><link name=\"a\"><visual><geometry><sphere radius=\"-1\"/></geometry></visual></link></robot>".to_string(),
+            "negative radius",
+        ),
+        (
+            "<robot name=\"r\"><link name=\"a\"/><link name=\"b\"/><joint name=\"j\" type=\"revolute\"><parent link=\"a\"/><child link=\"b\"/><axis xyz=\"0 0 1\"/><limit lower=\"1\" upper=\"-1\" effort=\"1\" velocity=\"1\"/></joint></robot>".to_string(),
+            "above upper",
+        ),
+    ];
+    for (text, want) in cases {
+        let e = load_urdf_str(&text, "odd.urdf").unwrap_err().to_string();
+        assert!(e.contains(want) && e.contains("odd.urdf"), "{want}: {e}");
+    }
+    // 20,000 nested elements (the serde parser behind urdf-rs overflowed its stack on these).
+    let deep = format!(
+        "<robot name=\"r\"><link name=\"a\">{}{}</link></robot>",
+        "<x>".repeat(20_000),
+        "</x>".repeat(20_000)
+    );
+    let e = load_urdf_str(&deep, "deep.urdf").unwrap_err().to_string();
+    assert!(e.contains("nested more than"), "{e}");
+    // A plausible body still loads.
+    load_urdf_str(&inertia("0.1", "0.1", "0.1", "0.01"), "ok.urdf").unwrap();
+}

@@ -372,7 +372,9 @@ mod autodiff_tests {
         };
         close(&y1, &y2, 1e-6);
         close(&gz1, &gz2, 1e-6);
-        close(&gb1, &gb2, 1e-5);
+        // The bias gradient sums 300 rows in another order: f32 reassociation error grows with
+        // the row count (≈ m · 2⁻²⁴ · Σ|terms|), so 1e-5 failed on unlucky draws.
+        close(&gb1, &gb2, m as f32 * 1e-6);
         // Inference path (no autodiff).
         let y3 = bias_elu(z0.clone().inner(), b0.clone().inner());
         close(&host(y3), &y2, 1e-6);
