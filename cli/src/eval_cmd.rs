@@ -47,6 +47,10 @@ pub struct EvalArgs {
     pub json: bool,
     #[command(flatten)]
     pub pins: PhysicsPins,
+    /// Play the policy through this action filter instead of its own `io.action_filter_alpha`
+    /// (a diagnostic: does the policy need its high-frequency target changes?).
+    #[arg(long)]
+    pub action_filter_alpha: Option<f32>,
 }
 
 /// Pins a randomised physical quantity at one value for the evaluation (otherwise the config's
@@ -155,7 +159,9 @@ pub fn constant_forward_command(env: &mut l3p_robots::config::EnvConfig, v: f32)
     env.commands.rel_standing_envs = 0.0;
 }
 
-/// Plays `policy` on `robot` with `env` and applies the walk criterion.
+/// Plays `policy` on `robot` with `env` and applies the walk criterion; the action filter is the
+/// policy's own unless `action_filter_alpha` overrides it.
+#[allow(clippy::too_many_arguments)]
 pub fn evaluate_row(
     robot: &l3p_robots::catalog::RobotSpec,
     env: &l3p_robots::config::EnvConfig,
@@ -164,11 +170,15 @@ pub fn evaluate_row(
     episodes: usize,
     seed: u64,
     forward: Option<f32>,
+    action_filter_alpha: Option<f32>,
 ) -> anyhow::Result<EvalRow> {
     // The policy's own action contract, whatever the config says: its filter is part of it.
     let mut env = env.clone();
     if let Some(io) = &policy.config.io {
         env.action_filter_alpha = io.action_filter_alpha;
+    }
+    if let Some(alpha) = action_filter_alpha {
+        env.action_filter_alpha = alpha;
     }
     let mut sim = l3p_actor::sim_env(robot, &env, envs, 1, seed)?;
     let max_steps = 1000 * (episodes / envs.max(1) + 2);
@@ -231,6 +241,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             args.episodes,
             args.seed,
             *forward,
+            args.action_filter_alpha,
         )?);
     }
     if args.json {
@@ -248,6 +259,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
                 "ground_friction": args.pins.ground_friction,
                 "added_mass": args.pins.added_mass,
                 "pushes": args.pins.pushes,
+                "action_filter_alpha": args.action_filter_alpha,
             },
             "rows": rows,
             "walks": rows.iter().all(|r| r.walk_failures.is_empty()),

@@ -90,6 +90,7 @@ fn walk_check(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<Walk
             WALK_CHECK_ENVS,
             WALK_CHECK_SEED,
             Some(v),
+            None,
         )?);
     }
     Ok(WalkCheck {
