@@ -93,6 +93,59 @@ pub fn robot_io(robot: &RobotSpec, env: &EnvConfig) -> Result<RobotIo, DeployErr
     })
 }
 
+/// How far outside its soft limits a measured joint may be (rad) before the state is not believed.
+pub const JOINT_LIMIT_MARGIN: f32 = 0.5;
+/// Fastest believable joint (rad/s): quadruped knee motors top out near 30.
+pub const MAX_JOINT_SPEED: f32 = 100.0;
+/// Fastest believable base linear (m/s) and angular (rad/s) velocity.
+pub const MAX_BASE_SPEED: f32 = 20.0;
+pub const MAX_BASE_RATE: f32 = 50.0;
+
+/// Whether a decoded, finite state is physically believable for the robot of `io`: joints within
+/// their soft limits ± [`JOINT_LIMIT_MARGIN`], speeds below the bounds above. A state that is not
+/// (a broken sensor, a hostile publisher) is rejected like a malformed one; if only such states
+/// arrive, the stale-state watchdog damps.
+pub fn plausible_state(state: &RobotState, io: &RobotIo) -> Result<(), String> {
+    for (j, (q, l)) in state
+        .joint_pos
+        .iter()
+        .zip(&io.soft_joint_limits)
+        .enumerate()
+    {
+        if *q < l[0] - JOINT_LIMIT_MARGIN || *q > l[1] + JOINT_LIMIT_MARGIN {
+            return Err(format!(
+                "joint {} at {q} rad, outside its limits [{}, {}] by more than {JOINT_LIMIT_MARGIN}",
+                io.joint_names[j], l[0], l[1]
+            ));
+        }
+    }
+    if let Some((j, v)) = state
+        .joint_vel
+        .iter()
+        .enumerate()
+        .find(|(_, v)| v.abs() > MAX_JOINT_SPEED)
+    {
+        return Err(format!(
+            "joint {} moving at {v} rad/s (more than {MAX_JOINT_SPEED})",
+            io.joint_names[j]
+        ));
+    }
+    let norm = |v: &[f32; 3]| v.iter().map(|x| x * x).sum::<f32>().sqrt();
+    if norm(&state.base_lin_vel) > MAX_BASE_SPEED {
+        return Err(format!(
+            "base moving at {} m/s (more than {MAX_BASE_SPEED})",
+            norm(&state.base_lin_vel)
+        ));
+    }
+    if norm(&state.base_ang_vel) > MAX_BASE_RATE {
+        return Err(format!(
+            "base turning at {} rad/s (more than {MAX_BASE_RATE})",
+            norm(&state.base_ang_vel)
+        ));
+    }
+    Ok(())
+}
+
 /// The wire state of `robot_id` standing still and level at the default pose, zero command.
 pub fn standing_state(io: &RobotIo, robot_id: &str) -> RobotState {
     RobotState {

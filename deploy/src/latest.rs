@@ -1,7 +1,8 @@
 //! [`LatestSlot`]: a Zenoh subscriber that keeps only the newest valid robot message (state or
 //! command) and when it arrived — never a queue, because an old state or command is worthless. Each
-//! message is decoded, validated (joint count, finite values) and checked for the robot id in the
-//! subscriber callback; rejects are counted and logged at powers of two.
+//! message is decoded, validated (joint count, finite values), checked for the robot id and by an
+//! optional extra check (the controller's: a physically believable state) in the subscriber
+//! callback; rejects are counted and logged at powers of two.
 
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
@@ -39,6 +40,9 @@ impl RobotMessage for RobotCommand {
 
 type Slot<T> = Arc<Mutex<Option<(T, Instant)>>>;
 
+/// A check beyond decoding and validation (e.g. [`crate::io::plausible_state`]).
+pub type ExtraCheck<T> = Box<dyn Fn(&T) -> Result<(), String> + Send + Sync>;
+
 /// The newest valid `T` on a key, with its receive time (monotonic clock of this process).
 pub struct LatestSlot<T> {
     slot: Slot<T>,
@@ -48,12 +52,14 @@ pub struct LatestSlot<T> {
 }
 
 impl<T: RobotMessage> LatestSlot<T> {
-    /// Subscribe to `key`, accepting messages for `robot_id` with `num_joints` joints.
+    /// Subscribe to `key`, accepting messages for `robot_id` with `num_joints` joints that pass
+    /// `extra` too.
     pub async fn subscribe(
         session: &zenoh::Session,
         key: String,
         robot_id: &str,
         num_joints: usize,
+        extra: Option<ExtraCheck<T>>,
     ) -> Result<Self, DeployError> {
         let slot: Slot<T> = Arc::new(Mutex::new(None));
         let accepted = Arc::new(AtomicU64::new(0));
@@ -77,6 +83,10 @@ impl<T: RobotMessage> LatestSlot<T> {
                         } else {
                             Err(format!("addressed to robot id {:?}", m.robot_id()))
                         }
+                    })
+                    .and_then(|m| match &extra {
+                        Some(check) => check(&m).map(|()| m),
+                        None => Ok(m),
                     });
                 match checked {
                     Ok(m) => {

@@ -61,11 +61,15 @@ pub async fn run_deploy(
     )?;
     let zerr = |e: zenoh::Error| DeployError::Zenoh(e.to_string());
 
+    let believable_io = loaded.io.clone();
     let states = LatestSlot::<RobotState>::subscribe(
         session,
         keys::robot_state(&opts.robot_id),
         &opts.robot_id,
         opts.robot.joint_names.len(),
+        Some(Box::new(move |s: &RobotState| {
+            crate::io::plausible_state(s, &believable_io)
+        })),
     )
     .await?;
     let (op_tx, op_rx) = std::sync::mpsc::channel::<OperatorAction>();

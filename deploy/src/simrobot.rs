@@ -89,6 +89,7 @@ pub async fn run_sim_robot(
         keys::robot_command(&opts.robot_id),
         &opts.robot_id,
         NUM_JOINTS,
+        None,
     )
     .await?;
     let states = session

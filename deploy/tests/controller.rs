@@ -517,3 +517,34 @@ fn wait_for_operator_keeps_the_robot_limp_until_resume() {
     // Limp for longer than zero_torque_s already: straight into the ramp.
     assert_eq!(modes, [ControlMode::Ramp, ControlMode::Policy]);
 }
+
+/// Finite but absurd states (joint velocity 1e30, joint position 1e6 — these drove the simulated
+/// robot to 42° of tilt before) are not believed; a real standing state is.
+#[test]
+fn physically_absurd_states_are_not_believed() {
+    use l3p_deploy::io::plausible_state;
+    let io = a1_io();
+    let ok = standing(&io);
+    plausible_state(&ok, &io).unwrap();
+    let mut fast = ok.clone();
+    fast.joint_vel[4] = 1e30;
+    let e = plausible_state(&fast, &io).unwrap_err();
+    assert!(e.contains("FR_thigh_joint") && e.contains("rad/s"), "{e}");
+    let mut far = ok.clone();
+    far.joint_pos[2] = 1e6;
+    let e = plausible_state(&far, &io).unwrap_err();
+    assert!(
+        e.contains("FL_calf_joint") && e.contains("outside its limits"),
+        "{e}"
+    );
+    let mut spinning = ok.clone();
+    spinning.base_ang_vel = [0.0, 0.0, 1e9];
+    assert!(
+        plausible_state(&spinning, &io)
+            .unwrap_err()
+            .contains("turning")
+    );
+    let mut flying = ok;
+    flying.base_lin_vel = [1e4, 0.0, 0.0];
+    assert!(plausible_state(&flying, &io).unwrap_err().contains("m/s"));
+}
