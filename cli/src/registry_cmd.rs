@@ -4,7 +4,6 @@
 //! open `<dir>/registry.db` directly without any service (SQLite locking keeps that safe next to a
 //! running service).
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -267,7 +266,8 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
         } => {
             let backend = Backend::connect(&target).await?;
             let (meta, bytes) = backend.get_blob(&artifact).await?;
-            write_atomically(&output, &bytes)?;
+            l3p_policy::write_atomic(&output, &bytes)
+                .with_context(|| format!("cannot write {}", output.display()))?;
             println!(
                 "{} -> {} ({} bytes, sha256 {})",
                 meta.reference(),
@@ -497,25 +497,5 @@ fn print_meta(m: &ArtifactMeta) -> anyhow::Result<()> {
     if !m.extra.is_null() {
         println!("extra:     {}", serde_json::to_string(&m.extra)?);
     }
-    Ok(())
-}
-
-/// Write `bytes` to `path` through a temporary file in the same directory, fsync, then rename.
-fn write_atomically(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let file_name = path
-        .file_name()
-        .with_context(|| format!("{} is not a file path", path.display()))?;
-    let tmp = dir.join(format!(".{}.part", file_name.to_string_lossy()));
-    let mut file =
-        std::fs::File::create(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
-    file.write_all(bytes)
-        .and_then(|_| file.sync_all())
-        .with_context(|| format!("cannot write {}", tmp.display()))?;
-    std::fs::rename(&tmp, path)
-        .with_context(|| format!("cannot rename {} to {}", tmp.display(), path.display()))?;
     Ok(())
 }

@@ -10,7 +10,6 @@ use l3p_proto::registry::{ArtifactKind, ArtifactMeta};
 use l3p_registry::RegistryClient;
 use l3p_robots::catalog::RobotSpec;
 use l3p_robots::config::{EnvConfig, PROPRIO_OBS};
-use sha2::{Digest, Sha256};
 
 use crate::DeployError;
 use crate::io::{ObservationBuilder, robot_io, standing_state};
@@ -28,10 +27,6 @@ pub struct LoadedPolicy {
     pub io_from_catalog: bool,
 }
 
-fn sha256_hex(bytes: &[u8]) -> String {
-    hex::encode(Sha256::digest(bytes))
-}
-
 /// Parse and check an export blob for `robot`. `expected_sha256` (from the registry's metadata) is
 /// compared with the bytes' hash.
 pub fn load_policy(
@@ -40,7 +35,7 @@ pub fn load_policy(
     expected_sha256: Option<&str>,
     robot: &RobotSpec,
 ) -> Result<LoadedPolicy, DeployError> {
-    let sha256 = sha256_hex(bytes);
+    let sha256 = l3p_registry::sha256_hex(bytes);
     if let Some(expected) = expected_sha256
         && expected != sha256
     {

@@ -22,7 +22,6 @@ use l3p_proto::{
     keys,
 };
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 use tokio::sync::mpsc;
 use tokio_util::sync::CancellationToken;
 use tracing::{debug, info, warn};
@@ -176,10 +175,6 @@ fn unix_ms() -> u64 {
         .unwrap_or(0)
 }
 
-fn sha256_hex(bytes: &[u8]) -> String {
-    hex::encode(Sha256::digest(bytes))
-}
-
 /// Build the PPO state: resume from the run's checkpoint when there is one, else start per mode.
 fn start_ppo(opts: &LearnerOptions, from_registry: Option<Vec<u8>>) -> Result<Ppo, LearnerError> {
     let device = l3p_policy::train_device();
@@ -212,22 +207,6 @@ fn start_ppo(opts: &LearnerOptions, from_registry: Option<Vec<u8>>) -> Result<Pp
     Ppo::new(opts.ppo.clone(), model, device)
 }
 
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), DaemonError> {
-    let io = |source| DaemonError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(io)?;
-    }
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes).map_err(io)?;
-    std::fs::File::open(&tmp)
-        .and_then(|f| f.sync_all())
-        .map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)
-}
-
 /// Encode each robot's weights for `version` and make them the ones served.
 fn publish_weights(
     ppo: &Ppo,
@@ -240,7 +219,7 @@ fn publish_weights(
     let mut entries = Vec::new();
     for spec in robots {
         let (bytes, config) = ppo.export(&spec.name)?;
-        let sha256 = sha256_hex(&bytes);
+        let sha256 = l3p_registry::sha256_hex(&bytes);
         entries.push(RobotWeights {
             robot: spec.name.clone(),
             sha256: sha256.clone(),
@@ -277,7 +256,8 @@ fn save_checkpoint(
 ) -> Result<(), DaemonError> {
     use l3p_registry::{ArtifactKind, PutRequest};
     let bytes = ppo.checkpoint_bytes()?;
-    write_atomic(&checkpoint_path(&opts.run_dir), &bytes)?;
+    let path = checkpoint_path(&opts.run_dir);
+    l3p_policy::write_atomic(&path, &bytes).map_err(|source| DaemonError::Io { path, source })?;
     let Some(uploader) = registry else {
         return Ok(());
     };

@@ -137,7 +137,7 @@ pub fn save_checkpoint(
     learner: serde_json::Value,
 ) -> Result<(), PolicyError> {
     let bytes = checkpoint_to_bytes(model, optimizer, iteration, learner)?;
-    write_atomic(path, &bytes)
+    write_file(path, &bytes)
 }
 
 /// Read a checkpoint file.
@@ -149,17 +149,34 @@ pub fn load_checkpoint(path: &Path, device: &Device) -> Result<Checkpoint, Polic
     checkpoint_from_bytes(&bytes, device).map_err(|e| e.in_file(path))
 }
 
-fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), PolicyError> {
-    let io = |source| PolicyError::Io {
+/// Writes `bytes` to `path` so that a crash leaves the old file or the new one, never a part: a
+/// temporary file in the same directory (created with it if missing), fsync, rename. The one
+/// atomic write of the workspace (checkpoints, exports, fetched registry blobs).
+pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    let dir = path
+        .parent()
+        .filter(|d| !d.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir)?;
+    let name = path.file_name().ok_or_else(|| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            format!("{} is not a file path", path.display()),
+        )
+    })?;
+    let tmp = dir.join(format!(".{}.part", name.to_string_lossy()));
+    let mut file = std::fs::File::create(&tmp)?;
+    file.write_all(bytes)?;
+    file.sync_all()?;
+    std::fs::rename(&tmp, path)
+}
+
+fn write_file(path: &Path, bytes: &[u8]) -> Result<(), PolicyError> {
+    write_atomic(path, bytes).map_err(|source| PolicyError::Io {
         path: path.display().to_string(),
         source,
-    };
-    if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-        std::fs::create_dir_all(dir).map_err(io)?;
-    }
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, bytes).map_err(io)?;
-    std::fs::rename(&tmp, path).map_err(io)
+    })
 }
 
 /// Host copy of one dense layer in export layout.
@@ -288,7 +305,7 @@ pub fn export_to_dir(
     let (bytes, config) = export_bytes(model, robot)?;
     let json =
         serde_json::to_vec_pretty(&config).map_err(|e| PolicyError::Export(e.to_string()))?;
-    write_atomic(&dir.join("policy.safetensors"), &bytes)?;
-    write_atomic(&dir.join("policy.json"), &json)?;
+    write_file(&dir.join("policy.safetensors"), &bytes)?;
+    write_file(&dir.join("policy.json"), &json)?;
     Ok(config)
 }
