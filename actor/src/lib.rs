@@ -132,7 +132,7 @@ impl RolloutEnv for SimEnv {
             terrain_level: e.terrain_level as f32,
             terrain_type: e.terrain_type.index() as u8,
             lin_vel_error: e.lin_vel_error,
-            yaw_rate_error: e.ang_vel_error,
+            yaw_rate_error: e.yaw_rate_error,
             terminated: e.reason != DoneReason::TimeOut,
             reward_terms: e.terms.to_vec(),
         }));

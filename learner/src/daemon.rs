@@ -4,7 +4,7 @@
 //! daemon loop), [`IterationReport`] (what a progress display receives), [`Event`] (everything the
 //! loop reacts to).
 //!
-//! One iteration: announce policy version `k` (JSON on `keys::policy_announce`, repeated every second
+//! One iteration: announce policy version `k` (JSON on `keys::policy_announce`, repeated every 500 ms
 //! so late actors catch up) and serve its weights (`keys::policy_weights`, verified by sha256); gather
 //! chunks for `k` from every live actor (liveliness tokens) or until `gather_timeout_s` passes; drop
 //! chunks older than `k − max_policy_lag` (counted); run the PPO update on a blocking thread; publish

@@ -317,7 +317,7 @@ pub struct EpisodeStats {
     /// Σ ‖v_xy(base) − cmd_xy‖ over steps.
     pub lin_vel_err_sum: f32,
     /// Σ |ω_z(base) − cmd_wz| over steps.
-    pub ang_vel_err_sum: f32,
+    pub yaw_rate_err_sum: f32,
 }
 
 /// Statistics of a finished episode.
@@ -332,7 +332,7 @@ pub struct EpisodeSummary {
     /// Mean ‖v_xy − cmd_xy‖ (m/s).
     pub mean_lin_vel_error: f32,
     /// Mean |ω_z − cmd_wz| (rad/s).
-    pub mean_ang_vel_error: f32,
+    pub mean_yaw_rate_error: f32,
     /// xy distance of the base from the env origin at the end (m), for the curriculum.
     pub distance: f32,
     /// ‖cmd_xy‖ at the end, for the curriculum.
@@ -847,7 +847,7 @@ impl Task {
         out.reward = total;
         env.episode.ret += total;
         env.episode.lin_vel_err_sum += lin_err_sq.sqrt();
-        env.episode.ang_vel_err_sum += ang_err.abs();
+        env.episode.yaw_rate_err_sum += ang_err.abs();
         env.last_action = *action;
         env.prev_mean_action = env.last_mean_action;
         env.last_mean_action = smooth;
@@ -890,7 +890,7 @@ impl Task {
             length: e.steps,
             terms: e.terms,
             mean_lin_vel_error: e.lin_vel_err_sum / n,
-            mean_ang_vel_error: e.ang_vel_err_sum / n,
+            mean_yaw_rate_error: e.yaw_rate_err_sum / n,
             distance: if distance.is_finite() { distance } else { 0.0 },
             command_xy_norm: env.command.xy_norm(),
             reason: env.last_reason,
@@ -1672,7 +1672,7 @@ mod tests {
         let s = task.finish_episode(&env, &st);
         assert_eq!(s.length, 10);
         assert!((s.mean_lin_vel_error - 0.4).abs() < 1e-5);
-        assert!((s.mean_ang_vel_error - 0.3).abs() < 1e-5);
+        assert!((s.mean_yaw_rate_error - 0.3).abs() < 1e-5);
         assert!((s.distance - 5.0).abs() < 1e-5);
         assert!((s.command_xy_norm - 1.0).abs() < 1e-6);
         let total: f32 = s.terms.iter().sum();

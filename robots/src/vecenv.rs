@@ -88,7 +88,7 @@ pub struct EpisodeInfo {
     /// Mean xy velocity tracking error (m/s).
     pub lin_vel_error: f32,
     /// Mean yaw-rate tracking error (rad/s).
-    pub ang_vel_error: f32,
+    pub yaw_rate_error: f32,
     /// Why it ended.
     pub reason: DoneReason,
     /// Per reward term (weighted, × dt), summed over the episode, [`crate::config::RewardTerm`] order.
@@ -494,7 +494,7 @@ impl VecEnv {
                         terrain_level: level,
                         terrain_type: shared.terrain.tile_type(col),
                         lin_vel_error: s.mean_lin_vel_error,
-                        ang_vel_error: s.mean_ang_vel_error,
+                        yaw_rate_error: s.mean_yaw_rate_error,
                         reason: s.reason,
                         terms: s.terms,
                     });
