@@ -316,4 +316,24 @@ async fn distributed_training_survives_bad_input_and_dead_processes() {
             && outage.values["registry_failed_attempts"] >= 1.0,
         "{outage:?}"
     );
+
+    // 6. A forged liveliness token (an "actor" that never sends) costs one gather timeout (30 s),
+    // not one per iteration: four more iterations within about two timeouts.
+    let _forged = session
+        .liveliness()
+        .declare_token(keys::actor_liveliness(RUN, "a1", "ghost"))
+        .await
+        .unwrap();
+    let target = outage.iteration + 4;
+    let after_ghost = watch
+        .until(
+            "progress past a silent actor",
+            Duration::from_secs(65),
+            |r| r.source == "learner" && r.iteration >= target,
+        )
+        .await;
+    assert!(
+        after_ghost.values["silent_actors"] <= 1.0,
+        "{after_ghost:?}"
+    );
 }

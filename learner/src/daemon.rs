@@ -515,6 +515,9 @@ pub async fn run(
 
     let announce_key = keys::policy_announce(&run);
     let mut live: BTreeSet<String> = BTreeSet::new();
+    // Live actors that sent nothing by a gather timeout: not waited for again until they send a
+    // chunk, so a silent (or forged) liveliness token costs one timeout, not one per iteration.
+    let mut silent: BTreeSet<String> = BTreeSet::new();
     let mut pending: BTreeMap<String, RolloutChunk> = BTreeMap::new();
     let mut dropped = 0u64;
     let mut rejected = 0u64;
@@ -554,7 +557,7 @@ pub async fn run(
                 None => break Err(DaemonError::Zenoh("subscriptions closed".into())),
                 Some(Event::Rejected) => rejected += 1,
                 Some(Event::ActorUp(id)) => { info!(actor = %id, "actor joined"); live.insert(id); }
-                Some(Event::ActorDown(id)) => { info!(actor = %id, "actor left"); live.remove(&id); }
+                Some(Event::ActorDown(id)) => { info!(actor = %id, "actor left"); silent.remove(&id); live.remove(&id); }
                 Some(Event::Chunk(chunk)) => {
                     let lag = version.saturating_sub(chunk.policy_version);
                     if chunk.policy_version > version || lag > opts.daemon.max_policy_lag {
@@ -562,6 +565,7 @@ pub async fn run(
                         dropped += 1;
                     } else {
                         let id = format!("{}/{}", chunk.robot, chunk.actor_id);
+                        silent.remove(&id);
                         if let Some(old) = pending.insert(id, *chunk) {
                             debug!(actor = %old.actor_id, "replaced an older chunk of the same actor");
                             dropped += 1;
@@ -574,8 +578,13 @@ pub async fn run(
         let waited = gather_start.elapsed().as_secs_f64();
         // `min_actors` only gates a fresh run's first update; later, whoever is alive counts.
         let enough_actors = live.len() >= opts.daemon.min_actors || ppo.iteration() > 0;
-        let everyone_reported =
-            enough_actors && !live.is_empty() && live.iter().all(|id| pending.contains_key(id));
+        let everyone_reported = enough_actors
+            && !live.is_empty()
+            && !pending.is_empty()
+            && live
+                .iter()
+                .filter(|id| !silent.contains(*id))
+                .all(|id| pending.contains_key(id));
         let timed_out = waited > opts.daemon.gather_timeout_s && !pending.is_empty();
         if !(everyone_reported || timed_out) {
             continue;
@@ -587,6 +596,11 @@ pub async fn run(
                 live = live.len(),
                 "gather timeout: updating with what arrived"
             );
+            for id in live.iter().filter(|id| !pending.contains_key(*id)) {
+                if silent.insert(id.clone()) {
+                    warn!(actor = %id, "silent at the gather timeout: not waited for until it sends a chunk");
+                }
+            }
         }
 
         // Update on a blocking thread; the subscription tasks keep buffering meanwhile.
@@ -654,6 +668,7 @@ pub async fn run(
         record.insert("actors", live.len() as f64);
         record.insert("dropped_chunks", dropped as f64);
         record.insert("rejected_chunks", rejected as f64);
+        record.insert("silent_actors", silent.len() as f64);
         if let Some(u) = &uploader {
             let stats = u.stats();
             record.insert("registry_backlog", stats.backlog() as f64);
