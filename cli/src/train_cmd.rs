@@ -133,27 +133,31 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     l3p_proto::keys::validate_segment("run", &config.run.name)?;
     let opts = learner_cmd::learner_options(&config, true)?;
     let run_dir = opts.run_dir.clone();
-    // Zenoh's usual port when it is free, so `l3p metrics --follow` in another terminal finds the run;
-    // the endpoint is also written to <run_dir>/endpoint.
-    let port = match std::net::TcpListener::bind(("127.0.0.1", 7447)) {
-        Ok(_) => 7447,
-        Err(_) => net::free_loopback_port()?,
-    };
+    // The endpoint the run listens on is written to <run_dir>/endpoint.
     std::fs::create_dir_all(&opts.run_dir)?;
-    std::fs::write(
-        opts.run_dir.join("endpoint"),
-        format!("tcp/127.0.0.1:{port}\n"),
-    )?;
-    // Actors read the same config, with the overrides applied.
-    // Actors connect to this process; it alone listens.
-    config.zenoh = ZenohSettings::loopback(None, &[port]);
-    let resolved = opts.run_dir.join("config.toml");
-    std::fs::write(&resolved, toml::to_string_pretty(&config)?)?;
-    config.zenoh = ZenohSettings::loopback(Some(port), &[]);
 
     runtime::tokio_runtime()?.block_on(async move {
         let cancel = runtime::cancel_on_signal();
-        let session = net::open_session(&config.zenoh).await?;
+        // Zenoh's usual port when it is free, so `l3p metrics --follow` in another terminal finds
+        // the run, else any free one. Binding is the test: a probe-then-bind could lose the port to
+        // another `l3p train` starting at the same moment.
+        let (session, port) = match net::open_session(&ZenohSettings::loopback(Some(7447), &[])).await {
+            Ok(session) => (session, 7447),
+            Err(_) => {
+                let port = net::free_loopback_port()?;
+                (net::open_session(&ZenohSettings::loopback(Some(port), &[])).await?, port)
+            }
+        };
+        std::fs::write(
+            opts.run_dir.join("endpoint"),
+            format!("tcp/127.0.0.1:{port}\n"),
+        )?;
+        // Actors read the same config, with the overrides applied; they connect to this process,
+        // which alone listens.
+        config.zenoh = ZenohSettings::loopback(None, &[port]);
+        let resolved = opts.run_dir.join("config.toml");
+        std::fs::write(&resolved, toml::to_string_pretty(&config)?)?;
+        config.zenoh = ZenohSettings::loopback(Some(port), &[]);
         let registry = Arc::new(l3p_registry::Registry::open(&config.run.data_dir)?);
         let registry_session = session.clone();
         // Not a child of `cancel`: the learner's final checkpoint still goes to the registry.

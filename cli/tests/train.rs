@@ -178,16 +178,21 @@ fn killed_train_leaves_no_orphan_actor() {
         .args(["train", config.to_str().unwrap(), "--quiet", "--data-dir"])
         .arg(dir.path().join("data"))
         .stdout(std::process::Stdio::null())
-        .stderr(std::process::Stdio::null())
+        .stderr(std::fs::File::create(dir.path().join("train.err")).unwrap())
         .spawn()
         .unwrap();
+    let log = || std::fs::read_to_string(dir.path().join("train.err")).unwrap_or_default();
     let deadline = Instant::now() + Duration::from_secs(60);
     let actors = loop {
         let found = children_with(train.id(), "--exit-with-parent");
         if !found.is_empty() {
             break found;
         }
-        assert!(Instant::now() < deadline, "no actor started");
+        assert!(
+            Instant::now() < deadline,
+            "no actor started; l3p train said:\n{}",
+            log()
+        );
         std::thread::sleep(Duration::from_millis(100));
     };
     // Let the actor get going (connected, collecting) before the parent dies.
