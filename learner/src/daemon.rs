@@ -11,7 +11,7 @@
 //! metrics; checkpoint every `checkpoint_every` iterations (and on shutdown) so that a restarted
 //! learner resumes at the same iteration with its optimiser state.
 
-use std::collections::{BTreeMap, BTreeSet, HashMap};
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, RwLock};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
@@ -28,6 +28,7 @@ use tracing::{debug, info, warn};
 use zenoh::Session;
 use zenoh::sample::SampleKind;
 
+use crate::gather::{ChunkFate, Gather, Ready, actor_key};
 use crate::uploader::{RegistryUploader, Upload};
 use crate::{LearnerError, Mode, Ppo, PpoConfig, RolloutBatch, UpdateMetrics};
 
@@ -514,14 +515,16 @@ pub async fn run(
     drop(tx);
 
     let announce_key = keys::policy_announce(&run);
-    let mut live: BTreeSet<String> = BTreeSet::new();
-    // Live actors that sent nothing by a gather timeout: not waited for again until they send a
-    // chunk, so a silent (or forged) liveliness token costs one timeout, not one per iteration.
-    let mut silent: BTreeSet<String> = BTreeSet::new();
-    let mut pending: BTreeMap<String, RolloutChunk> = BTreeMap::new();
-    let mut dropped = 0u64;
+    // Seconds on this process's monotonic clock, for the gather rule.
+    let clock = Instant::now();
+    let now_s = || clock.elapsed().as_secs_f64();
+    let mut gather = Gather::new(
+        opts.daemon.max_policy_lag,
+        opts.daemon.min_actors,
+        opts.daemon.gather_timeout_s,
+        now_s(),
+    );
     let mut rejected = 0u64;
-    let mut gather_start = Instant::now();
     let mut weights_seconds = 0f64;
     let mut last_checkpoint = ppo.iteration();
     let mut last_registry_checkpoint = ppo.iteration();
@@ -556,55 +559,38 @@ pub async fn run(
             event = events.recv() => match event {
                 None => break Err(DaemonError::Zenoh("subscriptions closed".into())),
                 Some(Event::Rejected) => rejected += 1,
-                Some(Event::ActorUp(id)) => { info!(actor = %id, "actor joined"); live.insert(id); }
-                Some(Event::ActorDown(id)) => { info!(actor = %id, "actor left"); silent.remove(&id); live.remove(&id); }
+                Some(Event::ActorUp(id)) => { info!(actor = %id, "actor joined"); gather.actor_up(id); }
+                Some(Event::ActorDown(id)) => { info!(actor = %id, "actor left"); gather.actor_down(&id); }
                 Some(Event::Chunk(chunk)) => {
-                    let lag = version.saturating_sub(chunk.policy_version);
-                    if chunk.policy_version > version || lag > opts.daemon.max_policy_lag {
-                        debug!(actor = %chunk.actor_id, chunk_version = chunk.policy_version, version, "dropped stale chunk");
-                        dropped += 1;
-                    } else {
-                        let id = format!("{}/{}", chunk.robot, chunk.actor_id);
-                        silent.remove(&id);
-                        if let Some(old) = pending.insert(id, *chunk) {
-                            debug!(actor = %old.actor_id, "replaced an older chunk of the same actor");
-                            dropped += 1;
-                        }
+                    let (actor, chunk_version) = (actor_key(&chunk), chunk.policy_version);
+                    match gather.chunk(*chunk, version) {
+                        ChunkFate::Stale => debug!(%actor, chunk_version, version, "dropped stale chunk"),
+                        ChunkFate::ReplacedOlder => debug!(%actor, "replaced an older chunk of the same actor"),
+                        ChunkFate::Accepted => {}
                     }
                 }
             },
         }
 
-        let waited = gather_start.elapsed().as_secs_f64();
-        // `min_actors` only gates a fresh run's first update; later, whoever is alive counts.
-        let enough_actors = live.len() >= opts.daemon.min_actors || ppo.iteration() > 0;
-        let everyone_reported = enough_actors
-            && !live.is_empty()
-            && !pending.is_empty()
-            && live
-                .iter()
-                .filter(|id| !silent.contains(*id))
-                .all(|id| pending.contains_key(id));
-        let timed_out = waited > opts.daemon.gather_timeout_s && !pending.is_empty();
-        if !(everyone_reported || timed_out) {
+        let now = now_s();
+        let Some(ready) = gather.ready(now, ppo.iteration() == 0) else {
             continue;
-        }
-        if timed_out && !everyone_reported {
+        };
+        let waited = gather.waited_s(now);
+        if ready == Ready::TimedOut {
             warn!(
                 waited_s = waited,
-                have = pending.len(),
-                live = live.len(),
+                have = gather.pending(),
+                live = gather.live(),
                 "gather timeout: updating with what arrived"
             );
-            for id in live.iter().filter(|id| !pending.contains_key(*id)) {
-                if silent.insert(id.clone()) {
-                    warn!(actor = %id, "silent at the gather timeout: not waited for until it sends a chunk");
-                }
-            }
+        }
+        let (chunks, newly_silent) = gather.take(ready, now);
+        for actor in newly_silent {
+            warn!(%actor, "silent at the gather timeout: not waited for until it sends a chunk");
         }
 
         // Update on a blocking thread; the subscription tasks keep buffering meanwhile.
-        let chunks: Vec<RolloutChunk> = std::mem::take(&mut pending).into_values().collect();
         let actor_transport = chunks
             .iter()
             .map(|c| c.transport_seconds as f64)
@@ -665,10 +651,10 @@ pub async fn run(
             "samples_per_second",
             update.samples as f64 / iteration_seconds.max(1e-9),
         );
-        record.insert("actors", live.len() as f64);
-        record.insert("dropped_chunks", dropped as f64);
+        record.insert("actors", gather.live() as f64);
+        record.insert("dropped_chunks", gather.dropped() as f64);
         record.insert("rejected_chunks", rejected as f64);
-        record.insert("silent_actors", silent.len() as f64);
+        record.insert("silent_actors", gather.silent() as f64);
         if let Some(u) = &uploader {
             let stats = u.stats();
             record.insert("registry_backlog", stats.backlog() as f64);
@@ -700,7 +686,6 @@ pub async fn run(
                 metrics: record,
             });
         }
-        gather_start = Instant::now();
     };
 
     // Final checkpoint, whatever stopped us.
@@ -729,7 +714,7 @@ pub async fn run(
     outcome?;
     Ok(LearnerSummary {
         iterations: ppo.iteration(),
-        dropped_chunks: dropped,
+        dropped_chunks: gather.dropped(),
         rejected_chunks: rejected,
     })
 }

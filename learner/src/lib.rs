@@ -16,6 +16,8 @@
 //! - [`UpdateMetrics`]: approx KL, clip fraction, explained variance, lr, entropy, mean std, every
 //!   loss, `R_obs` reconstruction MSE, samples/s.
 //! - [`bench`]: the `l3p bench learner` workload (synthetic data, timed update and inference).
+//! - [`gather::Gather`]: the daemon's gather rule (who to wait for, stale chunks, timeouts, silent
+//!   actors) as a pure, unit-tested state machine.
 //! - [`uploader::RegistryUploader`]: the daemon's background registry uploads (retried with
 //!   backoff; an outage never stops training).
 //!
@@ -24,6 +26,7 @@
 pub mod bench;
 pub mod daemon;
 pub mod gae;
+pub mod gather;
 pub mod ppo;
 pub mod report;
 pub mod storage;

@@ -1,0 +1,265 @@
+//! The learner's gather rule as a pure state machine (clock injected, no I/O), so that each rule of
+//! ARCHITECTURE.md "Protocol decisions" has a unit test. The daemon feeds it actor liveliness and
+//! chunks and asks [`Gather::ready`] after every event.
+//!
+//! Main type: [`Gather`]. Rules:
+//! - an update starts when every live actor that is not *silent* has a chunk for the current
+//!   version (or one at most `max_policy_lag` versions older), or when `gather_timeout_s` has passed
+//!   with at least one chunk;
+//! - `min_actors` gates only a fresh run's first update;
+//! - chunks from the future or older than the lag allows are dropped (counted), as is an older
+//!   chunk of an actor that sends a newer one;
+//! - a live actor without a chunk at a timeout becomes silent: it is not waited for again until it
+//!   sends a chunk (a forged or stuck liveliness token costs one timeout, not one per iteration).
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use l3p_proto::RolloutChunk;
+
+/// What became of an arriving chunk.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ChunkFate {
+    Accepted,
+    /// It replaced an older chunk of the same actor (that one is dropped).
+    ReplacedOlder,
+    /// Newer than the learner, or older than `max_policy_lag` allows.
+    Stale,
+}
+
+/// Why an update may start.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Ready {
+    /// Every live, non-silent actor has reported.
+    Everyone,
+    /// `gather_timeout_s` passed; the chunks that arrived are used.
+    TimedOut,
+}
+
+/// The gather state of one learner (see the module docs for the rules).
+#[derive(Debug, Clone)]
+pub struct Gather {
+    max_policy_lag: u64,
+    min_actors: usize,
+    timeout_s: f64,
+    live: BTreeSet<String>,
+    silent: BTreeSet<String>,
+    pending: BTreeMap<String, RolloutChunk>,
+    started_s: f64,
+    dropped: u64,
+}
+
+/// The id a chunk's actor has in liveliness: `<robot>/<actor>`.
+pub fn actor_key(chunk: &RolloutChunk) -> String {
+    format!("{}/{}", chunk.robot, chunk.actor_id)
+}
+
+impl Gather {
+    /// A gather starting at `now_s` (seconds on any monotonic clock).
+    pub fn new(max_policy_lag: u64, min_actors: usize, timeout_s: f64, now_s: f64) -> Self {
+        Self {
+            max_policy_lag,
+            min_actors,
+            timeout_s,
+            live: BTreeSet::new(),
+            silent: BTreeSet::new(),
+            pending: BTreeMap::new(),
+            started_s: now_s,
+            dropped: 0,
+        }
+    }
+
+    pub fn actor_up(&mut self, id: String) {
+        self.live.insert(id);
+    }
+
+    pub fn actor_down(&mut self, id: &str) {
+        self.silent.remove(id);
+        self.live.remove(id);
+    }
+
+    /// A chunk arrived while the learner is at `version`.
+    pub fn chunk(&mut self, chunk: RolloutChunk, version: u64) -> ChunkFate {
+        let lag = version.saturating_sub(chunk.policy_version);
+        if chunk.policy_version > version || lag > self.max_policy_lag {
+            self.dropped += 1;
+            return ChunkFate::Stale;
+        }
+        let id = actor_key(&chunk);
+        self.silent.remove(&id);
+        match self.pending.insert(id, chunk) {
+            Some(_) => {
+                self.dropped += 1;
+                ChunkFate::ReplacedOlder
+            }
+            None => ChunkFate::Accepted,
+        }
+    }
+
+    /// Whether an update may start at `now_s`; `first_update` is true before a fresh run's first.
+    pub fn ready(&self, now_s: f64, first_update: bool) -> Option<Ready> {
+        if self.pending.is_empty() {
+            return None;
+        }
+        let enough_actors = !first_update || self.live.len() >= self.min_actors;
+        let everyone = enough_actors
+            && !self.live.is_empty()
+            && self
+                .live
+                .iter()
+                .filter(|id| !self.silent.contains(*id))
+                .all(|id| self.pending.contains_key(id));
+        if everyone {
+            Some(Ready::Everyone)
+        } else if now_s - self.started_s > self.timeout_s {
+            Some(Ready::TimedOut)
+        } else {
+            None
+        }
+    }
+
+    /// Takes the chunks for the update and starts the next gather at `now_s`. After a timeout the
+    /// live actors that sent nothing become silent; their ids are returned (for the log).
+    pub fn take(&mut self, ready: Ready, now_s: f64) -> (Vec<RolloutChunk>, Vec<String>) {
+        let mut newly_silent = Vec::new();
+        if ready == Ready::TimedOut {
+            for id in self
+                .live
+                .iter()
+                .filter(|id| !self.pending.contains_key(*id))
+            {
+                if self.silent.insert(id.clone()) {
+                    newly_silent.push(id.clone());
+                }
+            }
+        }
+        self.started_s = now_s;
+        let chunks = std::mem::take(&mut self.pending).into_values().collect();
+        (chunks, newly_silent)
+    }
+
+    /// Seconds since the current gather started.
+    pub fn waited_s(&self, now_s: f64) -> f64 {
+        now_s - self.started_s
+    }
+
+    pub fn live(&self) -> usize {
+        self.live.len()
+    }
+
+    pub fn silent(&self) -> usize {
+        self.silent.len()
+    }
+
+    pub fn pending(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// Chunks dropped so far (stale or replaced).
+    pub fn dropped(&self) -> u64 {
+        self.dropped
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn chunk(robot: &str, actor: &str, version: u64) -> RolloutChunk {
+        RolloutChunk::zeros("run", robot, actor, version, 1, 1, 1, 1)
+    }
+
+    fn two_actors(now: f64) -> Gather {
+        let mut g = Gather::new(0, 2, 30.0, now);
+        g.actor_up("a1/a".into());
+        g.actor_up("go1/b".into());
+        g
+    }
+
+    #[test]
+    fn an_update_waits_for_every_live_actor() {
+        let mut g = two_actors(0.0);
+        assert_eq!(g.ready(0.0, true), None);
+        assert_eq!(g.chunk(chunk("a1", "a", 0), 0), ChunkFate::Accepted);
+        assert_eq!(g.ready(1.0, true), None);
+        g.chunk(chunk("go1", "b", 0), 0);
+        assert_eq!(g.ready(1.0, true), Some(Ready::Everyone));
+        let (chunks, silent) = g.take(Ready::Everyone, 1.0);
+        assert_eq!((chunks.len(), silent.len(), g.pending()), (2, 0, 0));
+    }
+
+    #[test]
+    fn min_actors_gates_only_the_first_update() {
+        let mut g = Gather::new(0, 2, 30.0, 0.0);
+        g.actor_up("a1/a".into());
+        g.chunk(chunk("a1", "a", 0), 0);
+        assert_eq!(g.ready(1.0, true), None, "one of two required actors");
+        assert_eq!(g.ready(1.0, false), Some(Ready::Everyone));
+    }
+
+    #[test]
+    fn stale_future_and_replaced_chunks_are_dropped_and_counted() {
+        let mut g = Gather::new(1, 1, 30.0, 0.0);
+        g.actor_up("a1/a".into());
+        assert_eq!(
+            g.chunk(chunk("a1", "a", 3), 5),
+            ChunkFate::Stale,
+            "lag 2 > 1"
+        );
+        assert_eq!(
+            g.chunk(chunk("a1", "a", 6), 5),
+            ChunkFate::Stale,
+            "from the future"
+        );
+        assert_eq!(
+            g.chunk(chunk("a1", "a", 4), 5),
+            ChunkFate::Accepted,
+            "lag 1"
+        );
+        assert_eq!(g.chunk(chunk("a1", "a", 5), 5), ChunkFate::ReplacedOlder);
+        assert_eq!(g.dropped(), 3);
+        let (chunks, _) = g.take(Ready::Everyone, 0.0);
+        assert_eq!(chunks[0].policy_version, 5, "the newer chunk is kept");
+    }
+
+    #[test]
+    fn a_timeout_updates_with_what_arrived_and_needs_a_chunk() {
+        let mut g = two_actors(10.0);
+        assert_eq!(g.ready(50.0, false), None, "nothing arrived: keep waiting");
+        g.chunk(chunk("a1", "a", 0), 0);
+        assert_eq!(g.ready(39.0, false), None);
+        assert_eq!(g.ready(41.0, false), Some(Ready::TimedOut));
+        let (chunks, silent) = g.take(Ready::TimedOut, 41.0);
+        assert_eq!(chunks.len(), 1);
+        assert_eq!(silent, ["go1/b"]);
+        assert_eq!(g.waited_s(42.0), 1.0, "the next gather starts at the take");
+    }
+
+    #[test]
+    fn a_silent_actor_costs_one_timeout_until_it_sends_again() {
+        let mut g = two_actors(0.0);
+        g.chunk(chunk("a1", "a", 0), 0);
+        let ready = g.ready(31.0, false).unwrap();
+        g.take(ready, 31.0);
+        assert_eq!(g.silent(), 1);
+        // Next iteration: the silent actor is not waited for.
+        g.chunk(chunk("a1", "a", 1), 1);
+        assert_eq!(g.ready(31.5, false), Some(Ready::Everyone));
+        g.take(Ready::Everyone, 31.5);
+        // It sends again: waited for again.
+        g.chunk(chunk("go1", "b", 2), 2);
+        assert_eq!(g.silent(), 0);
+        g.take(Ready::Everyone, 32.0);
+        g.chunk(chunk("a1", "a", 3), 3);
+        assert_eq!(g.ready(32.5, false), None, "b is expected again");
+    }
+
+    #[test]
+    fn an_actor_that_leaves_is_not_waited_for() {
+        let mut g = two_actors(0.0);
+        g.chunk(chunk("a1", "a", 0), 0);
+        assert_eq!(g.ready(1.0, false), None);
+        g.actor_down("go1/b");
+        assert_eq!(g.ready(1.0, false), Some(Ready::Everyone));
+        assert_eq!((g.live(), g.silent()), (1, 0));
+    }
+}
