@@ -3,13 +3,16 @@
 //!
 //! Main types: [`RolloutEnv`] (what the actor needs from a vectorised environment; implemented for
 //! `l3p_robots::VecEnv`), [`Collector`] (fills a [`RolloutChunk`] with `steps` control steps under one
-//! policy version), [`ActorOptions`] and [`run`] (the daemon loop).
+//! policy version), [`ActorOptions`] and [`run`] (the daemon loop), [`announce::AnnounceTracker`]
+//! (which policy to collect with next: a pure, unit-tested state machine).
 //!
 //! Daemon loop: declare a liveliness token `l3p/<run>/actors/<robot>/<actor>`; wait for a policy
 //! announce newer than the last version collected; fetch that version's weights by query and check
 //! their sha256 against the announce; collect a chunk on a blocking thread; publish it with
 //! `CongestionControl::Block` (Zenoh's default `Drop` silently loses large messages); publish episode
 //! metrics; repeat. A restarted actor simply joins at the version currently announced.
+
+pub mod announce;
 
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
@@ -28,6 +31,8 @@ use sha2::{Digest, Sha256};
 use tokio_util::sync::CancellationToken;
 use tracing::{info, warn};
 use zenoh::Session;
+
+use announce::{AnnounceTracker, Next};
 use zenoh::qos::CongestionControl;
 
 /// What the actor needs from a vectorised environment.
@@ -417,11 +422,8 @@ pub async fn run<E: RolloutEnv>(
     ));
     // Policy held, keyed by (learner incarnation, version), and the announce that named it.
     let mut policy: Option<((u64, u64), DeployPolicy)> = None;
-    let mut held: Option<PolicyAnnounce> = None;
-    let mut extra = 0u64;
+    let mut tracker = AnnounceTracker::default();
     let mut last_send_seconds = 0f64;
-    // (learner incarnation, policy version) of the last chunk sent.
-    let mut last_collected: Option<(u64, u64)> = None;
     let mut seq = 0u64;
     info!(robot = %opts.robot, actor = %opts.actor_id, envs = n, "actor ready, waiting for a policy");
 
@@ -429,39 +431,21 @@ pub async fn run<E: RolloutEnv>(
         if opts.max_chunks > 0 && seq >= opts.max_chunks {
             break;
         }
-        // Which policy to collect with. Collect once per (learner incarnation, version), so a
-        // learner restarted from a checkpoint is followed even to a version collected before; when
-        // the learner tolerates lag (`max_policy_lag` ≥ 1), keep collecting with the current policy
-        // while it updates, up to that many extra chunks per version (collection overlaps updates).
+        // Which policy to collect with: `announce::AnnounceTracker` holds the rules.
         let mut newest = None;
         while let Ok(Some(sample)) = announces.try_recv() {
             newest = Some(sample);
         }
-        let fresh = newest
-            .and_then(|s| decode_announce(&s.payload().to_bytes()))
-            .filter(|a| last_collected != Some((a.incarnation, a.version)));
-        let announce = match (fresh, &held) {
-            (Some(a), _) => {
-                extra = 0;
-                a
-            }
-            (None, Some(a))
-                if last_collected == Some((a.incarnation, a.version))
-                    && extra < a.max_policy_lag =>
-            {
-                extra += 1;
-                a.clone()
-            }
-            _ => {
+        let newest = newest.and_then(|s| decode_announce(&s.payload().to_bytes()));
+        let announce = match tracker.next(newest) {
+            Next::Collect(a) => a,
+            Next::Wait => {
                 let sample = tokio::select! {
                     _ = cancel.cancelled() => break,
                     sample = announces.recv_async() => match sample { Ok(s) => s, Err(_) => break },
                 };
-                match decode_announce(&sample.payload().to_bytes()) {
-                    Some(a) if last_collected != Some((a.incarnation, a.version)) => {
-                        extra = 0;
-                        a
-                    }
+                match decode_announce(&sample.payload().to_bytes()).map(|a| tracker.arrived(a)) {
+                    Some(Next::Collect(a)) => a,
                     _ => continue,
                 }
             }
@@ -472,7 +456,7 @@ pub async fn run<E: RolloutEnv>(
             match fetch_policy(&session, &announce, &opts.robot).await {
                 Ok(p) => {
                     policy = Some((key, p));
-                    held = Some(announce.clone());
+                    tracker.fetched(&announce);
                 }
                 Err(e) => {
                     warn!("{e}");
@@ -520,7 +504,7 @@ pub async fn run<E: RolloutEnv>(
         if let Ok(json) = codec::encode_json(&record) {
             let _ = session.put(&metrics_key, json).await;
         }
-        last_collected = Some((announce.incarnation, version));
+        tracker.collected((announce.incarnation, version));
         seq += 1;
         collector = Some(col);
         chunk = Some(ch);
