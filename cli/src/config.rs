@@ -65,47 +65,7 @@ impl Config {
             return Err("rollout.steps_per_env = 0: expected >= 1".into());
         }
         let ppo = &self.ppo;
-        for (key, v) in [
-            ("learning_rate", ppo.learning_rate),
-            ("lr_min", ppo.lr_min),
-            ("lr_max", ppo.lr_max),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("ppo.{key} = {v}: expected a finite number > 0"));
-            }
-        }
-        for (key, v) in [
-            ("clip_param", ppo.clip_param),
-            ("max_grad_norm", ppo.max_grad_norm),
-            ("desired_kl", ppo.desired_kl),
-            ("adam_epsilon", ppo.adam_epsilon),
-        ] {
-            if !(v.is_finite() && v > 0.0) {
-                return Err(format!("ppo.{key} = {v}: expected a finite number > 0"));
-            }
-        }
-        for (key, v) in [
-            ("value_loss_coef", ppo.value_loss_coef),
-            ("entropy_coef", ppo.entropy_coef),
-        ] {
-            if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("ppo.{key} = {v}: expected a finite number >= 0"));
-            }
-        }
-        for (key, v) in [("gamma", ppo.gamma), ("lam", ppo.lam)] {
-            if !(0.0..=1.0).contains(&v) {
-                return Err(format!("ppo.{key} = {v}: expected 0 <= {key} <= 1"));
-            }
-        }
-        for (key, v) in [
-            ("num_learning_epochs", ppo.num_learning_epochs),
-            ("num_mini_batches", ppo.num_mini_batches),
-        ] {
-            if v == 0 {
-                return Err(format!("ppo.{key} = 0: expected >= 1"));
-            }
-        }
-        ppo.validate().map_err(|e| format!("ppo: {e}"))?;
+        ppo.validate().map_err(|e| e.to_string())?;
         let envs: usize = self.actors.iter().map(|a| a.envs).sum();
         let batch = envs * self.rollout.steps_per_env;
         if !self.actors.is_empty() && batch < ppo.num_mini_batches {

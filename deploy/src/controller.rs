@@ -15,7 +15,7 @@
 
 use l3p_policy::RobotIo;
 use l3p_proto::{ControlMode, OperatorAction, RobotCommand, RobotState, WIRE_VERSION};
-use l3p_robots::task::projected_gravity;
+use l3p_robots::task::{filtered_action, projected_gravity};
 use serde::{Deserialize, Serialize};
 
 use crate::io::ObservationBuilder;
@@ -395,7 +395,7 @@ impl Controller {
                             let clip = self.io.action_clip;
                             let alpha = self.io.action_filter_alpha;
                             for (a, prev) in self.action.iter_mut().zip(&self.last_action) {
-                                *a = prev + alpha * (a.clamp(-clip, clip) - prev);
+                                *a = filtered_action(*prev, *a, clip, alpha);
                             }
                             self.last_action.clone_from(&self.action);
                             let target = self

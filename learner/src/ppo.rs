@@ -143,19 +143,51 @@ impl Default for PpoConfig {
 }
 
 impl PpoConfig {
+    /// Range checks of every field; errors name the key and the value (`ppo.<key> = <value>`).
     pub fn validate(&self) -> Result<(), LearnerError> {
-        let bad = |m: &str| Err(LearnerError::Config(m.to_string()));
-        if self.num_learning_epochs == 0 || self.num_mini_batches == 0 {
-            return bad("num_learning_epochs and num_mini_batches must be positive");
+        let bad = |m: String| Err(LearnerError::Config(m));
+        for (key, v) in [
+            ("num_learning_epochs", self.num_learning_epochs),
+            ("num_mini_batches", self.num_mini_batches),
+        ] {
+            if v == 0 {
+                return bad(format!("ppo.{key} = 0: expected >= 1"));
+            }
         }
-        if !(self.learning_rate > 0.0 && self.lr_min > 0.0 && self.lr_min <= self.lr_max) {
-            return bad("need learning_rate > 0 and 0 < lr_min <= lr_max");
+        for (key, v) in [
+            ("learning_rate", self.learning_rate),
+            ("lr_min", self.lr_min),
+            ("lr_max", self.lr_max),
+            ("clip_param", self.clip_param as f64),
+            ("max_grad_norm", self.max_grad_norm as f64),
+            ("desired_kl", self.desired_kl as f64),
+            ("adam_epsilon", self.adam_epsilon as f64),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                return bad(format!("ppo.{key} = {v}: expected a finite number > 0"));
+            }
         }
-        if !(0.0..=1.0).contains(&self.gamma) || !(0.0..=1.0).contains(&self.lam) {
-            return bad("gamma and lam must be in [0, 1]");
+        for (key, v) in [
+            ("value_loss_coef", self.value_loss_coef),
+            ("entropy_coef", self.entropy_coef),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(format!("ppo.{key} = {v}: expected a finite number >= 0"));
+            }
         }
-        if !(self.clip_param > 0.0 && self.max_grad_norm > 0.0 && self.lr_factor > 1.0) {
-            return bad("clip_param and max_grad_norm must be positive, lr_factor > 1");
+        for (key, v) in [("gamma", self.gamma), ("lam", self.lam)] {
+            if !(0.0..=1.0).contains(&v) {
+                return bad(format!("ppo.{key} = {v}: expected 0 <= {key} <= 1"));
+            }
+        }
+        if self.lr_min > self.lr_max {
+            return bad(format!(
+                "ppo.lr_min = {} is above ppo.lr_max = {}",
+                self.lr_min, self.lr_max
+            ));
+        }
+        if !(self.lr_factor.is_finite() && self.lr_factor > 1.0) {
+            return bad(format!("ppo.lr_factor = {}: expected > 1", self.lr_factor));
         }
         Ok(())
     }

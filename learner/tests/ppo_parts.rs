@@ -355,8 +355,8 @@ fn checkpoint_resume_gives_identical_actions_and_state() {
     );
 }
 
-#[test]
-fn bad_batches_are_errors_not_panics() {
+/// PPO with rsl_rl's defaults on a small MLP for the one robot `pm`.
+fn mlp_ppo() -> Ppo {
     let device = train_device();
     let model = init_model(
         Mode::Mlp,
@@ -366,15 +366,16 @@ fn bad_batches_are_errors_not_panics() {
         &device,
     )
     .unwrap();
-    let mut ppo = Ppo::new(
-        PpoConfig {
-            mode: Mode::Mlp,
-            ..Default::default()
-        },
-        model,
-        device,
-    )
-    .unwrap();
+    let cfg = PpoConfig {
+        mode: Mode::Mlp,
+        ..Default::default()
+    };
+    Ppo::new(cfg, model, device).unwrap()
+}
+
+#[test]
+fn bad_batches_are_errors_not_panics() {
+    let mut ppo = mlp_ppo();
     let mut b = RolloutBatch {
         robots: vec![RobotRollout::zeros("pm", 4, 4, OBS, ACT)],
     };
@@ -413,21 +414,8 @@ fn bad_batches_are_errors_not_panics() {
 /// a row stop training.
 #[test]
 fn non_finite_steps_are_skipped_and_only_repeated_divergence_stops_training() {
-    let device = train_device();
-    let model = init_model(
-        Mode::Mlp,
-        small_config(),
-        vec![RobotSpec::new("pm", OBS, ACT)],
-        None,
-        &device,
-    )
-    .unwrap();
-    let cfg = PpoConfig {
-        mode: Mode::Mlp,
-        ..Default::default()
-    };
-    let steps_per_update = cfg.num_learning_epochs * cfg.num_mini_batches;
-    let mut ppo = Ppo::new(cfg, model, device).unwrap();
+    let mut ppo = mlp_ppo();
+    let steps_per_update = ppo.config().num_learning_epochs * ppo.config().num_mini_batches;
     let mut overflowing = RolloutBatch {
         robots: vec![RobotRollout::zeros("pm", 8, 4, OBS, ACT)],
     };

@@ -340,6 +340,13 @@ pub struct EpisodeSummary {
     pub reason: DoneReason,
 }
 
+/// The action contract's filter (`io.action_filter_alpha`): the applied action after `previous`
+/// for raw output `raw`, `previous + α (clip(raw) − previous)`. Training and the deploy controller
+/// both call this.
+pub fn filtered_action(previous: f32, raw: f32, clip: f32, alpha: f32) -> f32 {
+    previous + alpha * (clip_action(raw, clip) - previous)
+}
+
 /// A raw action clipped to ±`clip`; non-finite becomes 0.
 fn clip_action(a: f32, clip: f32) -> f32 {
     if a.is_finite() {
@@ -547,7 +554,7 @@ impl Task {
         let mut bad = 0;
         for i in 0..NUM_JOINTS {
             bad += usize::from(!raw[i].is_finite());
-            let a = previous[i] + alpha * (clip_action(raw[i], c) - previous[i]);
+            let a = filtered_action(previous[i], raw[i], c, alpha);
             action[i] = a;
             targets[i] = self.robot.default_joint_pos[i] + self.robot.action_scale * a;
         }
@@ -732,10 +739,9 @@ impl Task {
         // The mean's path through the action filter, as the deployed policy's targets move (the
         // applied `action` is already filtered).
         let smooth: [f32; NUM_JOINTS] = match mean {
-            Some(m) => std::array::from_fn(|j| {
-                let prev = env.last_mean_action[j];
-                prev + alpha * (clip_action(m[j], c) - prev)
-            }),
+            Some(m) => {
+                std::array::from_fn(|j| filtered_action(env.last_mean_action[j], m[j], c, alpha))
+            }
             None => *action,
         };
         let mut out = StepResult::default();
