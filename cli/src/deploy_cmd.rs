@@ -15,7 +15,6 @@ use l3p_proto::{
 use l3p_registry::RegistryClient;
 use l3p_registry::net::{ZenohSettings, open_session};
 use l3p_robots::catalog::RobotSpec as Robot;
-use l3p_robots::config::{EnvConfig, PROPRIO_OBS};
 
 use crate::config::Config;
 use crate::runtime;
@@ -326,10 +325,8 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
             anyhow::Ok(blob?.1)
         })?
     };
-    let env_for = |obs_dim: usize| EnvConfig {
-        height_scan: obs_dim != PROPRIO_OBS,
-        ..config.env.clone()
-    };
+    // Only checkpoints without an `io` get one here: they predate the clock and the filter.
+    let env_for = |obs_dim: usize| l3p_deploy::io::env_for_policy(&config.env, obs_dim, None);
     let (export, export_config) = if bytes.starts_with(CHECKPOINT_MAGIC) {
         let mut ckpt = l3p_policy::checkpoint_from_bytes(&bytes, &cpu_device())?;
         let names: Vec<String> = ckpt.model.robots.iter().map(|r| r.name.clone()).collect();

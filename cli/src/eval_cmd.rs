@@ -172,11 +172,8 @@ pub fn evaluate_row(
     forward: Option<f32>,
     action_filter_alpha: Option<f32>,
 ) -> anyhow::Result<EvalRow> {
-    // The policy's own action contract, whatever the config says: its filter is part of it.
-    let mut env = env.clone();
-    if let Some(io) = &policy.config.io {
-        env.action_filter_alpha = io.action_filter_alpha;
-    }
+    // The policy's own observation and action contract, whatever the config says.
+    let mut env = l3p_deploy::io::env_for_policy(env, policy.obs_dim(), policy.config.io.as_ref());
     if let Some(alpha) = action_filter_alpha {
         env.action_filter_alpha = alpha;
     }
@@ -209,8 +206,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             anyhow::bail!("unknown terrain {other}\nhint: flat, simple-rough, curriculum or paper")
         }
     };
-    // A blind policy (48 observations) runs without the height scan.
-    config.env.height_scan = policy.obs_dim() != l3p_robots::config::PROPRIO_OBS;
+    // A blind policy runs without the height scan (evaluate_row applies the whole contract).
+    config.env =
+        l3p_deploy::io::env_for_policy(&config.env, policy.obs_dim(), policy.config.io.as_ref());
     if let Some(range) = &args.lin_vel_x {
         if range.len() != 2 || range[0] > range[1] {
             anyhow::bail!("--lin-vel-x takes MIN,MAX with MIN <= MAX, got {range:?}");

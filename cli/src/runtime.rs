@@ -2,7 +2,6 @@
 //! view of the configured robots.
 
 use l3p_robots::catalog::RobotSpec as Robot;
-use l3p_robots::config::{HEIGHT_SCAN_OBS, PROPRIO_OBS};
 use tokio_util::sync::CancellationToken;
 
 use crate::config::Config;
@@ -44,12 +43,7 @@ pub fn cancel_on_signal() -> CancellationToken {
 
 /// Observation size of the configured task.
 pub fn obs_dim(config: &Config) -> usize {
-    PROPRIO_OBS
-        + if config.env.height_scan {
-            HEIGHT_SCAN_OBS
-        } else {
-            0
-        }
+    config.env.obs_dim()
 }
 
 /// The policy's description of a robot under this config, with the controller contract

@@ -9,10 +9,10 @@ use l3p_policy::{DeployPolicy, RobotIo};
 use l3p_proto::registry::{ArtifactKind, ArtifactMeta};
 use l3p_registry::RegistryClient;
 use l3p_robots::catalog::RobotSpec;
-use l3p_robots::config::{EnvConfig, PROPRIO_OBS};
+use l3p_robots::config::EnvConfig;
 
 use crate::DeployError;
-use crate::io::{ObservationBuilder, robot_io, standing_state};
+use crate::io::{ObservationBuilder, env_for_policy, robot_io, standing_state};
 
 /// A policy checked against its robot, ready to arm.
 #[derive(Debug, Clone)]
@@ -71,10 +71,7 @@ pub fn load_policy(
     let (io, io_from_catalog) = match &config.io {
         Some(io) => (io.clone(), false),
         None => {
-            let env = EnvConfig {
-                height_scan: config.obs_dim != PROPRIO_OBS,
-                ..EnvConfig::default()
-            };
+            let env = env_for_policy(&EnvConfig::default(), config.obs_dim, None);
             (robot_io(robot, &env)?, true)
         }
     };
@@ -103,6 +100,7 @@ pub fn load_policy(
     builder.build(
         &standing_state(&loaded.io, "check"),
         &vec![0.0; joints],
+        0,
         &mut obs,
     );
     let finite = loaded

@@ -185,6 +185,9 @@ pub struct Controller {
     /// Start-up may leave zero-torque (always, unless `wait_for_operator`).
     armed: bool,
     last_action: Vec<f32>,
+    /// Policy steps since policy mode began (the gait clock's time base, as `episode.steps` is
+    /// in training).
+    policy_ticks: u64,
     last_target: Vec<f32>,
     obs: Vec<f32>,
     action: Vec<f32>,
@@ -213,6 +216,7 @@ impl Controller {
             ramp_from: io.default_joint_pos.clone(),
             armed: !safety.wait_for_operator,
             last_action: vec![0.0; n],
+            policy_ticks: 0,
             last_target: io.default_joint_pos.clone(),
             action: vec![0.0; n],
             damping_kd: io
@@ -348,6 +352,7 @@ impl Controller {
                     self.mode = ControlMode::Policy;
                     self.mode_since = Some(now);
                     self.last_action.iter_mut().for_each(|a| *a = 0.0);
+                    self.policy_ticks = 0;
                 }
             }
             ControlMode::Policy | ControlMode::Damping => {}
@@ -385,8 +390,13 @@ impl Controller {
                 let state = latest.map(|l| l.state);
                 match state {
                     Some(state) => {
-                        self.observations
-                            .build(state, &self.last_action, &mut self.obs);
+                        self.observations.build(
+                            state,
+                            &self.last_action,
+                            self.policy_ticks,
+                            &mut self.obs,
+                        );
+                        self.policy_ticks += 1;
                         policy.act(&self.obs, &mut self.action);
                         inferred = true;
                         if self.action.iter().all(|a| a.is_finite()) {

@@ -6,8 +6,8 @@
 use l3p_policy::{IO_VERSION, ObsSegment, RobotIo};
 use l3p_proto::RobotState;
 use l3p_robots::catalog::RobotSpec;
-use l3p_robots::config::{EnvConfig, HEIGHT_SCAN_OBS};
-use l3p_robots::task::projected_gravity;
+use l3p_robots::config::{EnvConfig, GAIT_CLOCK_OBS, HEIGHT_SCAN_OBS};
+use l3p_robots::task::{gait_clock_observation, gait_clock_phase, projected_gravity};
 
 use crate::DeployError;
 
@@ -21,6 +21,31 @@ pub const PROPRIO_SEGMENTS: [&str; 7] = [
     "joint_vel",
     "last_action",
 ];
+
+/// Name of the gait-clock observation segment.
+pub const GAIT_CLOCK_SEGMENT: &str = "gait_clock";
+
+/// `base` with what a policy's observation and action contract fix taken from the policy: the
+/// height scan (from its observation length when it carries no `io`), the gait clock and the
+/// action filter. Evaluating or serving a policy under another contract would feed it
+/// observations it never saw.
+pub fn env_for_policy(base: &EnvConfig, obs_dim: usize, io: Option<&RobotIo>) -> EnvConfig {
+    let mut env = base.clone();
+    match io {
+        Some(io) => {
+            env.height_scan = io.obs_layout.iter().any(|s| s.name == "height_scan");
+            env.gait_clock_hz = io.gait_clock_hz;
+            env.action_filter_alpha = io.action_filter_alpha;
+        }
+        None => {
+            // Checkpoints from before `io` existed: 48 or 48 + 187, no clock, no filter.
+            env.height_scan = obs_dim != l3p_robots::config::PROPRIO_OBS;
+            env.gait_clock_hz = 0.0;
+            env.action_filter_alpha = 1.0;
+        }
+    }
+    env
+}
 
 /// The I/O contract of `robot` trained under `env`: observation layout (IsaacLab's, unscaled),
 /// training gains, default pose, soft limits, clips, control period.
@@ -77,6 +102,14 @@ pub fn robot_io(robot: &RobotSpec, env: &EnvConfig) -> Result<RobotIo, DeployErr
             "clip(base_z − terrain_height − 0.5, −1, 1) on IsaacLab's 1.6 m × 1.0 m grid (0.1 m), yaw-aligned",
         ));
     }
+    if env.gait_clock_hz > 0.0 {
+        obs_layout.push(seg(
+            GAIT_CLOCK_SEGMENT,
+            GAIT_CLOCK_OBS,
+            "[sin 2πφ, cos 2πφ] of the trot clock, φ = frac(ticks · gait_clock_hz · control_dt), \
+             ticks = policy steps since the policy took over (0 at its first step)",
+        ));
+    }
     Ok(RobotIo {
         version: IO_VERSION,
         control_dt: env.sim_dt * env.decimation as f32,
@@ -88,6 +121,7 @@ pub fn robot_io(robot: &RobotSpec, env: &EnvConfig) -> Result<RobotIo, DeployErr
         effort_limit: robot.effort_limit.to_vec(),
         action_clip: env.action_clip,
         action_filter_alpha: env.action_filter_alpha,
+        gait_clock_hz: env.gait_clock_hz,
         obs_clip: env.obs_clip,
         obs_layout,
     })
@@ -170,6 +204,8 @@ pub struct ObservationBuilder {
     default_joint_pos: Vec<f32>,
     obs_clip: f32,
     obs_dim: usize,
+    gait_clock_hz: f32,
+    control_dt: f32,
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -181,6 +217,7 @@ enum Segment {
     JointPos,
     JointVel,
     LastAction,
+    GaitClock,
 }
 
 impl ObservationBuilder {
@@ -197,6 +234,7 @@ impl ObservationBuilder {
                 "joint_pos_rel" => (Segment::JointPos, joints),
                 "joint_vel" => (Segment::JointVel, joints),
                 "last_action" => (Segment::LastAction, joints),
+                GAIT_CLOCK_SEGMENT => (Segment::GaitClock, GAIT_CLOCK_OBS),
                 "height_scan" => {
                     return Err(DeployError::Policy(
                         "the policy observes a terrain height scan; deploy runs blind \
@@ -223,6 +261,8 @@ impl ObservationBuilder {
             default_joint_pos: io.default_joint_pos.clone(),
             obs_clip: io.obs_clip,
             obs_dim: io.obs_layout.iter().map(|s| s.len).sum(),
+            gait_clock_hz: io.gait_clock_hz,
+            control_dt: io.control_dt,
         })
     }
 
@@ -230,10 +270,13 @@ impl ObservationBuilder {
         self.obs_dim
     }
 
-    /// Writes the observation of `state` (already validated: finite, right joint count) and the
-    /// previous action into `out` (`obs_dim` long).
-    pub fn build(&self, state: &RobotState, last_action: &[f32], out: &mut [f32]) {
+    /// Writes the observation of `state` (already validated: finite, right joint count), the
+    /// previous action and, with a gait clock, its phase after `ticks` policy steps into `out`
+    /// (`obs_dim` long).
+    pub fn build(&self, state: &RobotState, last_action: &[f32], ticks: u64, out: &mut [f32]) {
         let gravity = projected_gravity(state.base_quat);
+        let clock =
+            gait_clock_observation(gait_clock_phase(ticks, self.gait_clock_hz, self.control_dt));
         let mut i = 0;
         for &(kind, len, scale) in &self.segments {
             for k in 0..len {
@@ -245,6 +288,7 @@ impl ObservationBuilder {
                     Segment::JointPos => state.joint_pos[k] - self.default_joint_pos[k],
                     Segment::JointVel => state.joint_vel[k],
                     Segment::LastAction => last_action[k],
+                    Segment::GaitClock => clock[k],
                 };
                 let v = scale * x;
                 out[i] = if v.is_nan() {

@@ -66,14 +66,26 @@ impl PolicyFn for Fixed {
 
 #[test]
 fn observation_matches_the_training_task() {
-    let env = flat_env();
+    observation_matches_with_clock(0.0);
+}
+
+#[test]
+fn observation_with_a_gait_clock_matches_the_training_task() {
+    observation_matches_with_clock(2.0);
+}
+
+fn observation_matches_with_clock(gait_clock_hz: f32) {
+    let mut env = flat_env();
+    env.gait_clock_hz = gait_clock_hz;
     let robot = a1();
     let spec = env.resolve("a1").unwrap();
     let terrain = Terrain::generate(&spec.terrain).unwrap();
     let mut task = Task::new(spec, robot.task_params(&robot.model().unwrap())).unwrap();
     task.spec.noise.enabled = false;
-    let io = a1_io();
+    let io = robot_io(robot, &env).unwrap();
     let builder = ObservationBuilder::new(&io).unwrap();
+    let dim = builder.obs_dim();
+    assert_eq!(dim, task.obs_dim());
     let mut rng = StdRng::seed_from_u64(3);
     for _ in 0..20 {
         let mut sim = l3p_robots::task::RobotState::default();
@@ -109,7 +121,10 @@ fn observation_matches_the_training_task() {
         for a in &mut env_state.last_action {
             *a = rng.random_range(-2.0..2.0);
         }
-        let mut expected = vec![0.0; 48];
+        // Training counts the clock in episode steps, the controller in policy ticks.
+        let ticks: u32 = rng.random_range(0..5000);
+        env_state.episode.steps = ticks;
+        let mut expected = vec![0.0; dim];
         task.observe(&env_state, &sim, &terrain, &mut rng, &mut expected)
             .unwrap();
 
@@ -123,8 +138,8 @@ fn observation_matches_the_training_task() {
             command: env_state.command.as_array(),
             ..standing(&io)
         };
-        let mut got = vec![0.0; 48];
-        builder.build(&wire, &env_state.last_action, &mut got);
+        let mut got = vec![0.0; dim];
+        builder.build(&wire, &env_state.last_action, ticks as u64, &mut got);
         for (i, (g, e)) in got.iter().zip(&expected).enumerate() {
             assert!((g - e).abs() < 1e-5, "obs[{i}]: deploy {g} vs training {e}");
         }
@@ -187,20 +202,80 @@ fn policy_targets_follow_the_training_action_filter() {
 }
 
 #[test]
-fn a_contract_from_a_newer_l3p_is_refused_and_a_version_1_one_reads_as_unfiltered() {
+fn a_contract_from_a_newer_l3p_is_refused_and_older_ones_read_as_unfiltered_and_clockless() {
     let io = a1_io();
     let mut json = serde_json::to_value(&io).unwrap();
-    assert_eq!(json["version"], 2);
-    json["version"] = 3.into();
+    assert_eq!(json["version"], 3);
+    json["version"] = 4.into();
     let newer: RobotIo = serde_json::from_value(json.clone()).unwrap();
     let err = newer.check(48, 12).unwrap_err();
-    assert!(err.contains("io.version 3"), "{err}");
+    assert!(err.contains("io.version 4"), "{err}");
+    let map = json.as_object_mut().unwrap();
+    map.insert("version".into(), 2.into());
+    map.remove("gait_clock_hz");
+    let v2: RobotIo = serde_json::from_value(json.clone()).unwrap();
+    assert_eq!((v2.version, v2.gait_clock_hz), (2, 0.0));
+    v2.check(48, 12).unwrap();
     let map = json.as_object_mut().unwrap();
     map.remove("version");
     map.remove("action_filter_alpha");
     let old: RobotIo = serde_json::from_value(json).unwrap();
     assert_eq!((old.version, old.action_filter_alpha), (1, 1.0));
     old.check(48, 12).unwrap();
+}
+
+#[test]
+fn a_clock_without_its_observation_segment_is_refused() {
+    let mut env = flat_env();
+    env.gait_clock_hz = 2.0;
+    let io = robot_io(a1(), &env).unwrap();
+    io.check(50, 12).unwrap();
+    let mut no_segment = io.clone();
+    no_segment.obs_layout.retain(|s| s.name != "gait_clock");
+    let err = no_segment.check(48, 12).unwrap_err();
+    assert!(err.contains("gait_clock"), "{err}");
+    let mut no_clock = io;
+    no_clock.gait_clock_hz = 0.0;
+    assert!(no_clock.check(50, 12).is_err());
+}
+
+/// Records the gait-clock entries (the last two) of every observation.
+struct ClockReader {
+    seen: Vec<[f32; 2]>,
+}
+
+impl PolicyFn for ClockReader {
+    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+        self.seen.push([obs[obs.len() - 2], obs[obs.len() - 1]]);
+        action.iter_mut().for_each(|a| *a = 0.0);
+    }
+}
+
+#[test]
+fn the_gait_clock_starts_at_phase_zero_when_the_policy_takes_over_and_advances_per_tick() {
+    let mut env = flat_env();
+    env.gait_clock_hz = 2.0;
+    let io = robot_io(a1(), &env).unwrap();
+    let mut c = Controller::new("dog", io.clone(), 0.25, SafetyConfig::default()).unwrap();
+    let mut policy = ClockReader { seen: Vec::new() };
+    let state = standing(&io);
+    let mut t = 0.0;
+    while policy.seen.len() < 26 {
+        t += DT;
+        tick_at(&mut c, t, &state, t - 0.005, &mut policy);
+    }
+    // 2 Hz at 50 Hz: 25 ticks per period, a quarter period = 6.25 ticks.
+    let tau = std::f32::consts::TAU;
+    for (k, seen) in policy.seen.iter().enumerate() {
+        let phase = (k as f32 * 2.0 * 0.02).fract();
+        let want = [(tau * phase).sin(), (tau * phase).cos()];
+        assert!(
+            (seen[0] - want[0]).abs() < 1e-4 && (seen[1] - want[1]).abs() < 1e-4,
+            "tick {k}: {seen:?} vs {want:?}"
+        );
+    }
+    assert!((policy.seen[0][1] - 1.0).abs() < 1e-6);
+    assert!((policy.seen[25][1] - 1.0).abs() < 1e-4, "one period later");
 }
 
 #[test]

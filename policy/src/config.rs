@@ -222,7 +222,8 @@ pub struct RobotSpec {
 #[serde(deny_unknown_fields)]
 pub struct RobotIo {
     /// Version of this contract. 1 (files without the field): no action filter. 2: adds
-    /// `action_filter_alpha`; a version-1 file reads as α = 1, which is what it meant.
+    /// `action_filter_alpha`; a version-1 file reads as α = 1, which is what it meant. 3: adds
+    /// `gait_clock_hz` and the `gait_clock` observation segment; older files read as no clock.
     #[serde(default = "io_version_1")]
     pub version: u32,
     /// Policy period (s); 0.02 = 50 Hz.
@@ -244,6 +245,11 @@ pub struct RobotIo {
     /// action and the `last_action` observation. 1 = no filter.
     #[serde(default = "no_action_filter")]
     pub action_filter_alpha: f32,
+    /// Frequency (Hz) of the trot clock the policy observes (segment `gait_clock`:
+    /// `[sin 2πφ, cos 2πφ]`, φ = frac(ticks · gait_clock_hz · control_dt), ticks = policy steps
+    /// since the policy took over, 0 at its first step). 0 = no clock.
+    #[serde(default)]
+    pub gait_clock_hz: f32,
     /// Every observation entry is clipped to ±`obs_clip` after scaling.
     pub obs_clip: f32,
     /// Observation segments in order; their lengths sum to `obs_dim`.
@@ -262,7 +268,7 @@ pub struct ObsSegment {
 }
 
 /// The `io` contract version this build writes and the newest it reads.
-pub const IO_VERSION: u32 = 2;
+pub const IO_VERSION: u32 = 3;
 
 fn io_version_1() -> u32 {
     1
@@ -286,6 +292,20 @@ impl RobotIo {
             return Err(format!(
                 "io.action_filter_alpha {} is not in (0, 1]",
                 self.action_filter_alpha
+            ));
+        }
+        if !(self.gait_clock_hz.is_finite() && self.gait_clock_hz >= 0.0) {
+            return Err(format!(
+                "io.gait_clock_hz {} is not a finite value >= 0",
+                self.gait_clock_hz
+            ));
+        }
+        let clock_segment = self.obs_layout.iter().any(|s| s.name == "gait_clock");
+        if clock_segment != (self.gait_clock_hz > 0.0) {
+            return Err(format!(
+                "io.gait_clock_hz is {} but the observation layout {} a gait_clock segment",
+                self.gait_clock_hz,
+                if clock_segment { "has" } else { "has no" }
             ));
         }
         let per_joint: [(&str, usize); 6] = [

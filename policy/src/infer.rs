@@ -17,7 +17,7 @@
 //!   "std": "std", "core_sha256": "…",
 //!   "io": { "control_dt": 0.02, "joint_names": [...], "default_joint_pos": [...], "kp": [...],
 //!           "kd": [...], "soft_joint_limits": [[lo, hi], ...], "effort_limit": [...],
-//!           "action_clip": 100.0, "action_filter_alpha": 1.0, "obs_clip": 100.0, "version": 2,
+//!           "action_clip": 100.0, "action_filter_alpha": 1.0, "gait_clock_hz": 0.0, "obs_clip": 100.0, "version": 3,
 //!           "obs_layout": [ { "name": "base_lin_vel", "len": 3, "scale": 1.0, "description": "…" }, ... ] } }
 //! ```
 //!

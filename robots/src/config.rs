@@ -463,6 +463,9 @@ reward_terms! {
     /// Σ (a_t − 2 a_{t−1} + a_{t−2})² of the policy's mean action: zero for smooth motion at any
     /// speed, 16 a² for a sign flip every step (the 25 Hz chatter).
     ActionSmoothnessL2 => action_smoothness_l2 = 0.0,
+    /// Share of feet whose contact matches the trot clock's pattern (`task::gait_clock_stance`),
+    /// when commanded to move and `gait_clock_hz` > 0.
+    GaitClock => gait_clock = 0.0,
 }
 
 impl RewardScales {
@@ -696,6 +699,10 @@ pub struct EnvConfig {
     /// step (1 = none, IsaacLab). The filtered action is what becomes the joint target and the
     /// `last_action` observation; the deploy side applies the same filter (`io`).
     pub action_filter_alpha: f32,
+    /// Frequency (Hz) of a trot clock the policy observes (`[sin 2πφ, cos 2πφ]` appended to the
+    /// observation, φ = fraction of the clock's period since the episode began) and the
+    /// `gait_clock` reward follows; 0 = no clock (IsaacLab). Part of the export's `io` contract.
+    pub gait_clock_hz: f32,
     pub terrain: TerrainConfig,
     pub commands: CommandConfig,
     pub noise: NoiseConfig,
@@ -715,6 +722,7 @@ impl Default for EnvConfig {
             obs_clip: 100.0,
             action_clip: 100.0,
             action_filter_alpha: 1.0,
+            gait_clock_hz: 0.0,
             recipe: Recipe::L3p,
             terrain: TerrainConfig::default(),
             commands: CommandConfig::default(),
@@ -742,6 +750,9 @@ action_clip = 100.0
 # Low-pass filter of the applied action per control step: a = a_prev + alpha (clip(raw) - a_prev);
 # 1 = none (IsaacLab). Deploy applies the same filter (it is part of the export's io contract).
 action_filter_alpha = 1.0
+# Trot clock (Hz) observed as [sin, cos] of its phase (2 more observations) and followed by the
+# gait_clock reward (diagonal pairs alternate, half a period each); 0 = none. Part of io.
+gait_clock_hz = 0.0
 # Defaults of [rewards] and [randomization]: "l3p" (IsaacLab's per-robot tables plus l3p's gait
 # terms and actuator randomisation) or "isaaclab" (the tables alone).
 recipe = "l3p"
@@ -853,6 +864,15 @@ base_height_fraction = 1.0
 pub const PROPRIO_OBS: usize = 48;
 /// Number of height-scan samples (17 × 11).
 pub const HEIGHT_SCAN_OBS: usize = 187;
+/// Number of gait-clock observations (`sin`, `cos` of the phase).
+pub const GAIT_CLOCK_OBS: usize = 2;
+
+/// Observation length of a task: proprioception, then the height scan, then the gait clock.
+pub fn obs_dim_of(height_scan: bool, gait_clock: bool) -> usize {
+    PROPRIO_OBS
+        + if height_scan { HEIGHT_SCAN_OBS } else { 0 }
+        + if gait_clock { GAIT_CLOCK_OBS } else { 0 }
+}
 
 /// Everything concrete for one robot: what the task and the vectorised env run on.
 #[derive(Debug, Clone, PartialEq)]
@@ -867,12 +887,14 @@ pub struct TaskSpec {
     /// `ceil(episode_length_s / step_dt)` (IsaacLab `max_episode_length`): 1000 by default.
     pub max_episode_steps: u32,
     pub height_scan: bool,
-    /// 48 or 235.
+    /// [`obs_dim_of`]: 48, + 187 with the height scan, + 2 with the gait clock.
     pub obs_dim: usize,
     pub obs_clip: f32,
     pub action_clip: f32,
     /// See [`EnvConfig::action_filter_alpha`]; in (0, 1].
     pub action_filter_alpha: f32,
+    /// See [`EnvConfig::gait_clock_hz`]; 0 = no clock.
+    pub gait_clock_hz: f32,
     pub terrain: TerrainSpec,
     pub commands: CommandConfig,
     pub noise: NoiseConfig,
@@ -921,6 +943,11 @@ impl EnvConfig {
         Ok(toml::from_str(text)?)
     }
 
+    /// Observation length of this task ([`obs_dim_of`]).
+    pub fn obs_dim(&self) -> usize {
+        obs_dim_of(self.height_scan, self.gait_clock_hz > 0.0)
+    }
+
     /// Whether the terrain preset is rough (selects IsaacLab's rough or flat reward table).
     pub fn is_rough(&self) -> bool {
         self.terrain.preset != TerrainPreset::Flat
@@ -961,6 +988,7 @@ impl EnvConfig {
                 format!("{} not in (0, 1]", self.action_filter_alpha),
             ));
         }
+        check_nonneg("gait_clock_hz", self.gait_clock_hz)?;
         let c = &self.commands;
         check_range("commands.lin_vel_x", c.lin_vel_x)?;
         check_range("commands.lin_vel_y", c.lin_vel_y)?;
@@ -1075,14 +1103,11 @@ impl EnvConfig {
             episode_length_s: self.episode_length_s,
             max_episode_steps: steps,
             height_scan: self.height_scan,
-            obs_dim: if self.height_scan {
-                PROPRIO_OBS + HEIGHT_SCAN_OBS
-            } else {
-                PROPRIO_OBS
-            },
+            obs_dim: self.obs_dim(),
             obs_clip: self.obs_clip,
             action_clip: self.action_clip,
             action_filter_alpha: self.action_filter_alpha,
+            gait_clock_hz: self.gait_clock_hz,
             terrain,
             commands: self.commands.clone(),
             noise: self.noise.clone(),

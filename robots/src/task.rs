@@ -34,7 +34,7 @@
 use rand::Rng;
 use thiserror::Error;
 
-use crate::config::{HEIGHT_SCAN_OBS, PROPRIO_OBS, TaskSpec};
+use crate::config::{GAIT_CLOCK_OBS, HEIGHT_SCAN_OBS, PROPRIO_OBS, TaskSpec};
 pub use crate::config::{NUM_REWARD_TERMS, RewardTerm};
 use crate::terrain::Terrain;
 
@@ -370,6 +370,38 @@ pub fn trot_contact(foot_force: &[f32; NUM_FEET], threshold: f32) -> f32 {
     }
 }
 
+/// Phase φ ∈ [0, 1) of a `hz` gait clock after `steps` control steps of `dt` seconds since the
+/// episode (or the deploy controller's policy mode) began. Counting steps, not accumulating time,
+/// keeps training and deployment on the same phase however long either runs.
+pub fn gait_clock_phase(steps: u64, hz: f32, dt: f32) -> f32 {
+    let cycles = steps as f64 * hz as f64 * dt as f64;
+    (cycles - cycles.floor()) as f32
+}
+
+/// The clock's observation: `[sin 2πφ, cos 2πφ]` (continuous across the period's wrap).
+pub fn gait_clock_observation(phase: f32) -> [f32; 2] {
+    let a = std::f32::consts::TAU * phase;
+    [a.sin(), a.cos()]
+}
+
+/// The trot the clock asks for, per foot (FL, FR, RL, RR): `true` = stance. The diagonal pair
+/// FL + RR stands in the first half of the period while FR + RL swing, then they swap.
+pub fn gait_clock_stance(phase: f32) -> [bool; NUM_FEET] {
+    let first_half = phase < 0.5;
+    [first_half, !first_half, !first_half, first_half]
+}
+
+/// Share of feet whose contact (force above `threshold`) matches [`gait_clock_stance`].
+pub fn gait_clock_match(foot_force: &[f32; NUM_FEET], threshold: f32, phase: f32) -> f32 {
+    let stance = gait_clock_stance(phase);
+    let matching = foot_force
+        .iter()
+        .zip(stance)
+        .filter(|(f, s)| (**f > threshold) == *s)
+        .count();
+    matching as f32 / NUM_FEET as f32
+}
+
 // ---------------------------------------------------------------------------------------------
 // Per-env state
 
@@ -515,9 +547,22 @@ impl Task {
         })
     }
 
-    /// Observation length: 48, or 235 with the height scan.
+    /// Observation length ([`crate::config::obs_dim_of`]).
     pub fn obs_dim(&self) -> usize {
         self.spec.obs_dim
+    }
+
+    /// Phase of the gait clock for `env` now (0 without a clock): after `episode.steps` steps.
+    pub fn gait_phase(&self, env: &TaskEnvState) -> f32 {
+        if self.spec.gait_clock_hz > 0.0 {
+            gait_clock_phase(
+                env.episode.steps as u64,
+                self.spec.gait_clock_hz,
+                self.spec.step_dt,
+            )
+        } else {
+            0.0
+        }
     }
 
     /// Policy step (s).
@@ -832,6 +877,12 @@ impl Task {
         if cmd.xy_norm() > p.air_time_min_command || cmd.wz.abs() > p.air_time_min_command {
             raw[RewardTerm::TrotContact as usize] =
                 trot_contact(&state.foot_force, p.contact_threshold);
+            if self.spec.gait_clock_hz > 0.0 {
+                // The phase the next observation shows (`steps` already counts this step).
+                let phase = self.gait_phase(env);
+                raw[RewardTerm::GaitClock as usize] =
+                    gait_clock_match(&state.foot_force, p.contact_threshold, phase);
+            }
         }
         let mut deviation = 0.0;
         for j in (0..NUM_JOINTS).step_by(3) {
@@ -905,7 +956,8 @@ impl Task {
 
     /// Writes the observation of one env into `out` (length [`Task::obs_dim`]):
     /// `[v_b (3), ω_b (3), g_b (3), cmd (3), q − q_default (12), q̇ (12), last action (12)]`
-    /// then, with the height scan, 187 values `clip(base_z − h − 0.5 + noise, −1, 1)`; additive
+    /// then, with the height scan, 187 values `clip(base_z − h − 0.5 + noise, −1, 1)`, then, with
+    /// the gait clock, `[sin 2πφ, cos 2πφ]` ([`Task::gait_phase`], noise-free); additive
     /// uniform noise per [`crate::config::NoiseConfig`]; every entry clipped to ±`obs_clip`.
     pub fn observe<R: Rng + ?Sized>(
         &self,
@@ -962,6 +1014,16 @@ impl Task {
                 };
                 *s = x.clamp(-1.0, 1.0);
             }
+        }
+        if self.spec.gait_clock_hz > 0.0 {
+            let at = PROPRIO_OBS
+                + if self.spec.height_scan {
+                    HEIGHT_SCAN_OBS
+                } else {
+                    0
+                };
+            out[at..at + GAIT_CLOCK_OBS]
+                .copy_from_slice(&gait_clock_observation(self.gait_phase(env)));
         }
         let clip = self.spec.obs_clip;
         for o in out.iter_mut() {
@@ -1269,6 +1331,72 @@ mod tests {
         env.command.vx = 0.0;
         let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
         assert_eq!(r.terms[RewardTerm::TrotContact as usize], 0.0);
+    }
+
+    #[test]
+    fn gait_clock_phase_observation_and_reward_match_hand_computation() {
+        // 2 Hz at 50 Hz: 25 steps per period; step 5 is 0.2 of the way, step 30 again 0.2.
+        assert_eq!(gait_clock_phase(0, 2.0, 0.02), 0.0);
+        assert!((gait_clock_phase(5, 2.0, 0.02) - 0.2).abs() < 1e-6);
+        assert!((gait_clock_phase(30, 2.0, 0.02) - 0.2).abs() < 1e-5);
+        // Days into a deployment the clock still advances 0.04 per step (f64 counting, no loss).
+        let (a, b) = (
+            gait_clock_phase(25_000_005, 2.0, 0.02),
+            gait_clock_phase(25_000_006, 2.0, 0.02),
+        );
+        assert!((b - a - 0.04).abs() < 1e-5, "{a} → {b}");
+        let [s, c] = gait_clock_observation(0.25);
+        assert!((s - 1.0).abs() < 1e-6 && c.abs() < 1e-6);
+        assert_eq!(gait_clock_stance(0.1), [true, false, false, true]);
+        assert_eq!(gait_clock_stance(0.6), [false, true, true, false]);
+        // FL + RR down in the first half: all four match; a pace matches two; all down two.
+        assert_eq!(gait_clock_match(&[40.0, 0.0, 0.0, 40.0], 1.0, 0.1), 1.0);
+        assert_eq!(gait_clock_match(&[40.0, 0.0, 0.0, 40.0], 1.0, 0.6), 0.0);
+        assert_eq!(gait_clock_match(&[40.0, 0.0, 40.0, 0.0], 1.0, 0.1), 0.5);
+        assert_eq!(gait_clock_match(&[40.0; 4], 1.0, 0.6), 0.5);
+
+        let mut cfg = EnvConfig::default();
+        cfg.terrain.preset = TerrainPreset::Flat;
+        cfg.height_scan = false;
+        cfg.gait_clock_hz = 2.0;
+        cfg.rewards.gait_clock = Some(0.8);
+        let spec = cfg.resolve("a1").unwrap();
+        assert_eq!(spec.obs_dim, PROPRIO_OBS + GAIT_CLOCK_OBS);
+        let terrain = Terrain::generate(&spec.terrain).unwrap();
+        let mut task = Task::new(spec, a1_params()).unwrap();
+        task.spec.noise.enabled = false;
+        let mut rng = StdRng::seed_from_u64(3);
+        let mut st = standing_state();
+        let mut env = TaskEnvState::new();
+        task.reset_env(&mut env, &st, [0.0; 3], &mut rng);
+        env.command = Command {
+            vx: 0.5,
+            time_left: 10.0,
+            ..Default::default()
+        };
+        let mut obs = vec![0.0; task.obs_dim()];
+        task.observe(&env, &st, &terrain, &mut rng, &mut obs)
+            .unwrap();
+        assert_eq!(&obs[48..], &[0.0, 1.0], "phase 0 at the episode's start");
+        // Step 1 lands at phase 0.04 (first half): FR + RL should swing.
+        st.foot_force = [40.0, 0.0, 0.0, 40.0];
+        let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
+        assert!((r.terms[RewardTerm::GaitClock as usize] - 0.8 * 0.02).abs() < 1e-7);
+        task.observe(&env, &st, &terrain, &mut rng, &mut obs)
+            .unwrap();
+        let want = gait_clock_observation(0.04);
+        assert!((obs[48] - want[0]).abs() < 1e-6 && (obs[49] - want[1]).abs() < 1e-6);
+        // Thirteen steps in (phase 0.52) the same contacts are all wrong.
+        for _ in 0..12 {
+            task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
+        }
+        let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
+        assert_eq!(r.terms[RewardTerm::GaitClock as usize], 0.0);
+        // Not commanded to move: no clock reward.
+        env.command.vx = 0.0;
+        st.foot_force = [0.0, 40.0, 40.0, 0.0];
+        let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
+        assert_eq!(r.terms[RewardTerm::GaitClock as usize], 0.0);
     }
 
     #[test]
