@@ -41,6 +41,14 @@ pub fn learner_options(config: &Config, use_registry: bool) -> anyhow::Result<Le
         use_registry,
         steps_per_env: config.rollout.steps_per_env,
         obs_clip: config.env.obs_clip,
+        mirrors: if config.ppo.symmetry_coef > 0.0 {
+            robots
+                .iter()
+                .map(|r| Ok((r.name.to_string(), runtime::mirror(config, r)?)))
+                .collect::<anyhow::Result<_>>()?
+        } else {
+            Vec::new()
+        },
     })
 }
 

@@ -46,6 +46,30 @@ pub fn obs_dim(config: &Config) -> usize {
     config.env.obs_dim()
 }
 
+/// Left-right mirror maps of `robot`'s task under this config (for `[ppo] symmetry_coef`).
+pub fn mirror(config: &Config, robot: &Robot) -> anyhow::Result<l3p_learner::Mirror> {
+    let model = robot.model()?;
+    let m = l3p_robots::mirror::TaskMirror::new(
+        &model,
+        &robot.joint_names,
+        &robot.default_pose,
+        config.env.height_scan,
+        config.env.gait_clock_hz > 0.0,
+    )
+    .map_err(|e| {
+        anyhow::anyhow!(
+            "{}: no mirror symmetry for ppo.symmetry_coef: {e}",
+            robot.name
+        )
+    })?;
+    Ok(l3p_learner::Mirror {
+        obs_index: m.observation.index,
+        obs_sign: m.observation.sign,
+        action_index: m.action.index,
+        action_sign: m.action.sign,
+    })
+}
+
 /// The policy's description of a robot under this config, with the controller contract
 /// ([`l3p_policy::RobotIo`]) that travels into checkpoints and deploy artifacts.
 pub fn policy_robot(config: &Config, robot: &Robot) -> anyhow::Result<l3p_policy::RobotSpec> {

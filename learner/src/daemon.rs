@@ -30,7 +30,7 @@ use zenoh::sample::SampleKind;
 
 use crate::gather::{ChunkFate, Gather, Ready, actor_key};
 use crate::uploader::{RegistryUploader, Upload};
-use crate::{LearnerError, Mode, Ppo, PpoConfig, RolloutBatch, UpdateMetrics};
+use crate::{LearnerError, Mirror, Mode, Ppo, PpoConfig, RolloutBatch, UpdateMetrics};
 
 /// `[learner]` config section: how the daemon gathers data and keeps state.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -86,6 +86,8 @@ pub struct LearnerOptions {
     /// clip (`[env] obs_clip`); a chunk outside it is rejected on arrival.
     pub steps_per_env: usize,
     pub obs_clip: f32,
+    /// Left-right mirror maps per robot name, for `[ppo] symmetry_coef`.
+    pub mirrors: Vec<(String, Mirror)>,
 }
 
 /// How long a stopping learner waits for queued registry uploads.
@@ -178,6 +180,19 @@ fn unix_ms() -> u64 {
 
 /// Build the PPO state: resume from the run's checkpoint when there is one, else start per mode.
 fn start_ppo(opts: &LearnerOptions, from_registry: Option<Vec<u8>>) -> Result<Ppo, LearnerError> {
+    let mut ppo = load_or_init_ppo(opts, from_registry)?;
+    for (robot, mirror) in &opts.mirrors {
+        if ppo.model().robot_index(robot).is_ok() {
+            ppo.set_mirror(robot, mirror)?;
+        }
+    }
+    Ok(ppo)
+}
+
+fn load_or_init_ppo(
+    opts: &LearnerOptions,
+    from_registry: Option<Vec<u8>>,
+) -> Result<Ppo, LearnerError> {
     let device = l3p_policy::train_device();
     let path = checkpoint_path(&opts.run_dir);
     if path.exists() {

@@ -33,7 +33,9 @@ pub mod storage;
 pub mod uploader;
 
 pub use gae::{compute_gae, explained_variance, normalize};
-pub use ppo::{Mode, Ppo, PpoConfig, Schedule, UpdateMetrics, clip_global_grad_norm, param_ids};
+pub use ppo::{
+    Mirror, Mode, Ppo, PpoConfig, Schedule, UpdateMetrics, clip_global_grad_norm, param_ids,
+};
 pub use storage::{RobotRollout, RolloutBatch};
 
 use burn::tensor::Device;

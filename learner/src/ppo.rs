@@ -12,13 +12,14 @@
 //!    each minibatch takes the k-th slice of every robot's permutation, runs every robot through its
 //!    adapters and the shared core, computes the KL to the behaviour policy and adapts the learning
 //!    rate *before* the step, the clipped surrogate, the clipped value loss, the entropy bonus and
-//!    `λ (L_rec_obs + L_rec_act)`, back-propagates, clips the global gradient norm and steps Adam.
+//!    `λ (L_rec_obs + L_rec_act)`, with `symmetry_coef` > 0 the mirror loss on the same minibatch
+//!    mirrored left-right ([`Mirror`]), back-propagates, clips the global gradient norm and steps Adam.
 
 use std::time::Instant;
 
 use burn::module::{Module, ModuleVisitor, Param, ParamId};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
-use burn::tensor::{Device, Tensor, TensorData};
+use burn::tensor::{Device, Int, Tensor, TensorData};
 use l3p_policy::{
     Arch, PolicyModel, PolicyNet, gaussian_entropy, gaussian_log_prob, tensor_to_vec,
 };
@@ -115,6 +116,10 @@ pub struct PpoConfig {
     pub adam_epsilon: f32,
     /// Seed of minibatch shuffling and diffusion noise.
     pub seed: u64,
+    /// Weight of the mirror-symmetry loss `mean((μ(M_o o) − M_a μ(o))²)` (Yu et al. 2018): the
+    /// policy's mean on a left-right mirrored observation should be the mirrored mean. 0 = off;
+    /// every robot then needs a [`Mirror`] ([`Ppo::set_mirror`]).
+    pub symmetry_coef: f32,
 }
 
 impl Default for PpoConfig {
@@ -138,6 +143,7 @@ impl Default for PpoConfig {
             max_grad_norm: 1.0,
             adam_epsilon: 1e-8,
             seed: 1,
+            symmetry_coef: 0.0,
         }
     }
 }
@@ -170,6 +176,7 @@ impl PpoConfig {
         for (key, v) in [
             ("value_loss_coef", self.value_loss_coef),
             ("entropy_coef", self.entropy_coef),
+            ("symmetry_coef", self.symmetry_coef),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(format!("ppo.{key} = {v}: expected a finite number >= 0"));
@@ -226,6 +233,8 @@ pub struct UpdateMetrics {
     pub value_loss: f32,
     pub rec_obs_loss: f32,
     pub rec_act_loss: f32,
+    /// Mirror-symmetry loss (0 when `symmetry_coef` is 0).
+    pub symmetry_loss: f32,
     pub total_loss: f32,
     /// Global gradient norm before clipping (mean over minibatches).
     pub grad_norm: f32,
@@ -254,6 +263,38 @@ struct Prepared {
     perm: Vec<usize>,
 }
 
+/// Left-right mirror maps of one robot's observation and action (`out[i] = sign[i] · in[index[i]]`;
+/// built by `l3p_robots::mirror::TaskMirror` from the robot's geometry).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mirror {
+    pub obs_index: Vec<usize>,
+    pub obs_sign: Vec<f32>,
+    pub action_index: Vec<usize>,
+    pub action_sign: Vec<f32>,
+}
+
+/// A [`Mirror`] on the device.
+#[derive(Debug, Clone)]
+struct MirrorTensors {
+    obs_index: Tensor<1, Int>,
+    obs_sign: Tensor<2>,
+    action_index: Tensor<1, Int>,
+    action_sign: Tensor<2>,
+}
+
+impl MirrorTensors {
+    fn observations(&self, obs: Tensor<2>) -> Tensor<2> {
+        obs.select(1, self.obs_index.clone())
+            .mul(self.obs_sign.clone())
+    }
+
+    fn actions(&self, actions: Tensor<2>) -> Tensor<2> {
+        actions
+            .select(1, self.action_index.clone())
+            .mul(self.action_sign.clone())
+    }
+}
+
 /// The PPO learner state.
 pub struct Ppo {
     cfg: PpoConfig,
@@ -265,6 +306,8 @@ pub struct Ppo {
     rng: StdRng,
     /// Consecutive updates in which every minibatch step was skipped as non-finite.
     diverged_updates: u32,
+    /// Per model robot, for the symmetry loss.
+    mirrors: Vec<Option<MirrorTensors>>,
 }
 
 /// Updates in a row with no finite step before training stops.
@@ -305,8 +348,10 @@ impl Ppo {
         let optim = adam(&cfg);
         let lr = cfg.learning_rate;
         let rng = StdRng::seed_from_u64(cfg.seed);
+        let mirrors = vec![None; model.robots.len()];
         Ok(Self {
             cfg,
+            mirrors,
             model,
             optim,
             device,
@@ -319,6 +364,53 @@ impl Ppo {
 
     pub fn config(&self) -> &PpoConfig {
         &self.cfg
+    }
+
+    /// Sets `robot`'s mirror maps (needed for every robot when `symmetry_coef` > 0); checks that
+    /// each is a permutation of the robot's dimensions with signs ±1.
+    pub fn set_mirror(&mut self, robot: &str, mirror: &Mirror) -> Result<(), LearnerError> {
+        let i = self.model.robot_index(robot)?;
+        let spec = &self.model.robots[i];
+        let check = |what: &str, index: &[usize], sign: &[f32], dim: usize| {
+            let mut seen = vec![false; dim];
+            let ok = index.len() == dim
+                && sign.len() == dim
+                && sign.iter().all(|s| *s == 1.0 || *s == -1.0)
+                && index
+                    .iter()
+                    .all(|&j| j < dim && !std::mem::replace(&mut seen[j], true));
+            if ok {
+                Ok(())
+            } else {
+                Err(LearnerError::Config(format!(
+                    "robot {robot}: the {what} mirror is not a signed permutation of {dim} entries"
+                )))
+            }
+        };
+        check(
+            "observation",
+            &mirror.obs_index,
+            &mirror.obs_sign,
+            spec.obs_dim,
+        )?;
+        check(
+            "action",
+            &mirror.action_index,
+            &mirror.action_sign,
+            spec.action_dim,
+        )?;
+        let index = |v: &[usize]| {
+            let v: Vec<i64> = v.iter().map(|&j| j as i64).collect();
+            let n = v.len();
+            Tensor::<1, Int>::from_data(TensorData::new(v, [n]), &self.device)
+        };
+        self.mirrors[i] = Some(MirrorTensors {
+            obs_index: index(&mirror.obs_index),
+            obs_sign: self.tensor2(mirror.obs_sign.clone(), 1, spec.obs_dim),
+            action_index: index(&mirror.action_index),
+            action_sign: self.tensor2(mirror.action_sign.clone(), 1, spec.action_dim),
+        });
+        Ok(())
     }
 
     pub fn model(&self) -> &PolicyModel {
@@ -457,6 +549,12 @@ impl Ppo {
                     cfg.num_mini_batches
                 )));
             }
+            if cfg.symmetry_coef > 0.0 && self.mirrors[i].is_none() {
+                return Err(LearnerError::Config(format!(
+                    "ppo.symmetry_coef = {} but robot {} has no mirror maps",
+                    cfg.symmetry_coef, r.robot
+                )));
+            }
             index.push(i);
         }
 
@@ -517,6 +615,18 @@ impl Ppo {
                     per_robot.push((mb, g));
                 }
                 let outs = self.model.net.actors(obs_t.clone());
+                // The same minibatch mirrored left-right, for the symmetry loss.
+                let mirrored_outs = (cfg.symmetry_coef > 0.0).then(|| {
+                    let mirrored = obs_t
+                        .iter()
+                        .zip(&self.mirrors)
+                        .map(|(o, m)| match (o, m) {
+                            (Some(o), Some(m)) => Some(m.observations(o.clone())),
+                            _ => None,
+                        })
+                        .collect();
+                    self.model.net.actors(mirrored)
+                });
                 let mut loss_total: Option<Tensor<1>> = None;
                 let mut mb_kl = 0f32;
                 for ((mb, g), p) in per_robot.into_iter().zip(&prepared) {
@@ -578,6 +688,19 @@ impl Ppo {
                         let l = z_hat.sub(z.clone().detach()).square().mean();
                         acc.rec_act += w * scalar(l.clone().detach())?;
                         loss = loss.add(l.mul_scalar(lambda));
+                    }
+                    if let (Some(outs_m), Some(m)) = (&mirrored_outs, &self.mirrors[p.robot]) {
+                        let out_m = outs_m[p.robot]
+                            .as_ref()
+                            .ok_or_else(|| LearnerError::Batch("missing mirrored output".into()))?;
+                        let l = out_m
+                            .mean
+                            .clone()
+                            .sub(m.actions(out.mean.clone()))
+                            .square()
+                            .mean();
+                        acc.symmetry += w * scalar(l.clone().detach())?;
+                        loss = loss.add(l.mul_scalar(cfg.symmetry_coef));
                     }
                     acc.surrogate += w * scalar(surrogate.detach())?;
                     acc.value += w * scalar(value_loss.detach())?;
@@ -658,6 +781,7 @@ impl Ppo {
             value_loss: acc.value / steps,
             rec_obs_loss: acc.rec_obs / steps,
             rec_act_loss: acc.rec_act / steps,
+            symmetry_loss: acc.symmetry / steps,
             total_loss: acc.total / steps,
             grad_norm: acc.grad_norm / steps,
             skipped_steps: acc.skipped,
@@ -726,6 +850,7 @@ struct Acc {
     entropy: f32,
     rec_obs: f32,
     rec_act: f32,
+    symmetry: f32,
     total: f32,
     grad_norm: f32,
     steps: usize,

@@ -449,3 +449,85 @@ fn non_finite_steps_are_skipped_and_only_repeated_divergence_stops_training() {
         }
     }
 }
+
+/// The point mass mirrored in y: obs `[p.x, p.y, t.x, t.y]`, action `[a.x, a.y]`.
+fn point_mass_mirror() -> Mirror {
+    Mirror {
+        obs_index: vec![0, 1, 2, 3],
+        obs_sign: vec![1.0, -1.0, 1.0, -1.0],
+        action_index: vec![0, 1],
+        action_sign: vec![1.0, -1.0],
+    }
+}
+
+/// RMS of `μ(M_o o) − M_a μ(o)` over random observations.
+fn asymmetry(ppo: &Ppo) -> f32 {
+    let mut rng = StdRng::seed_from_u64(21);
+    let mut sum = 0.0;
+    let n = 256;
+    for _ in 0..n {
+        let o: Vec<f32> = (0..OBS)
+            .map(|_| rand::Rng::random_range(&mut rng, -1.0..1.0))
+            .collect();
+        let mo = [o[0], -o[1], o[2], -o[3]];
+        let a = ppo.model().act_mean_host(0, &o).unwrap();
+        let b = ppo.model().act_mean_host(0, &mo).unwrap();
+        sum += (b[0] - a[0]).powi(2) + (b[1] + a[1]).powi(2);
+    }
+    (sum / (n * ACT) as f32).sqrt()
+}
+
+#[test]
+fn the_symmetry_loss_makes_the_policy_mirror_symmetric() {
+    let train = |coef: f32| {
+        let ppo = mlp_ppo();
+        let mut cfg = ppo.config().clone();
+        cfg.symmetry_coef = coef;
+        let mut ppo = Ppo::new(cfg, ppo.model().clone(), train_device()).unwrap();
+        if coef > 0.0 {
+            ppo.set_mirror("pm", &point_mass_mirror()).unwrap();
+        }
+        let before = asymmetry(&ppo);
+        let mut env = PointMass::new(32, 7);
+        let mut rng = StdRng::seed_from_u64(11);
+        let mut last = UpdateMetrics::default();
+        for _ in 0..15 {
+            let batch = collect(ppo.model(), &mut env, 8, &mut rng);
+            last = ppo.update(&batch).unwrap();
+        }
+        (before, asymmetry(&ppo), last.symmetry_loss)
+    };
+    let (before, without, loss_off) = train(0.0);
+    let (before_on, with, loss_on) = train(1.0);
+    assert_eq!(loss_off, 0.0);
+    assert!(loss_on > 0.0 && loss_on.is_finite());
+    assert!(
+        with < 0.3 * without && with < before_on,
+        "asymmetry: initial {before} / {before_on}, trained without the loss {without}, with it {with}"
+    );
+}
+
+#[test]
+fn a_symmetry_loss_without_a_valid_mirror_is_a_clear_error() {
+    let base = mlp_ppo();
+    let mut cfg = base.config().clone();
+    cfg.symmetry_coef = 0.5;
+    let mut ppo = Ppo::new(cfg, base.model().clone(), train_device()).unwrap();
+    let batch = RolloutBatch {
+        robots: vec![RobotRollout::zeros("pm", 4, 4, OBS, ACT)],
+    };
+    let err = ppo.update(&batch).unwrap_err().to_string();
+    assert!(err.contains("symmetry_coef") && err.contains("pm"), "{err}");
+    let mut bad = point_mass_mirror();
+    bad.obs_index = vec![0, 0, 2, 3];
+    let err = ppo.set_mirror("pm", &bad).unwrap_err().to_string();
+    assert!(err.contains("observation mirror"), "{err}");
+    let mut short = point_mass_mirror();
+    short.action_sign = vec![1.0];
+    assert!(ppo.set_mirror("pm", &short).is_err());
+    let mut scaled = point_mass_mirror();
+    scaled.obs_sign[1] = -2.0;
+    assert!(ppo.set_mirror("pm", &scaled).is_err());
+    ppo.set_mirror("pm", &point_mass_mirror()).unwrap();
+    ppo.update(&batch).unwrap();
+}

@@ -24,6 +24,8 @@
 //!   `robot_state(e)`. Observations of reset envs are those of the new episode (legged_gym order).
 //! - [`gait::GaitMeter`] → [`gait::GaitReport`], [`gait::WalkCriterion`]: gait diagnostics and the
 //!   walk criterion of `l3p eval` / `l3p bench walk`.
+//! - [`mirror::TaskMirror`]: the left-right observation and action maps of a robot's task, derived
+//!   from its geometry (PPO's symmetry loss).
 //! - [`bench::run_sim_bench`], [`bench::stand_check`]: the work behind `l3p bench sim` and
 //!   `l3p robots check`.
 //!
@@ -34,6 +36,7 @@ pub mod bench;
 pub mod catalog;
 pub mod config;
 pub mod gait;
+pub mod mirror;
 pub mod model;
 pub mod sim;
 pub mod task;
