@@ -48,7 +48,8 @@ pub fn env_for_policy(base: &EnvConfig, obs_dim: usize, io: Option<&RobotIo>) ->
 }
 
 /// The I/O contract of `robot` trained under `env`: observation layout (IsaacLab's, unscaled),
-/// training gains, default pose, soft limits, clips, control period.
+/// training gains (the catalog's × the centre of `env`'s kp/kd scale ranges), default pose, soft
+/// limits, clips, control period.
 pub fn robot_io(robot: &RobotSpec, env: &EnvConfig) -> Result<RobotIo, DeployError> {
     let model = robot
         .model()
@@ -110,13 +111,17 @@ pub fn robot_io(robot: &RobotSpec, env: &EnvConfig) -> Result<RobotIo, DeployErr
              ticks = policy steps since the policy took over (0 at its first step)",
         ));
     }
+    // The gains the policy was trained around: the catalog's, scaled by the centre of the
+    // config's kp/kd randomisation (a config that trains stiffer says so here, and deploy uses it).
+    let randomization = env.randomization(robot.name);
+    let mid = |r: [f32; 2]| 0.5 * (r[0] + r[1]);
     Ok(RobotIo {
         version: IO_VERSION,
         control_dt: env.sim_dt * env.decimation as f32,
         joint_names: robot.joint_names.iter().map(|s| s.to_string()).collect(),
         default_joint_pos: robot.default_pose.to_vec(),
-        kp: vec![robot.training_gains.kp; n],
-        kd: vec![robot.training_gains.kd; n],
+        kp: vec![robot.training_gains.kp * mid(randomization.kp_scale); n],
+        kd: vec![robot.training_gains.kd * mid(randomization.kd_scale); n],
         soft_joint_limits: params.soft_limits().to_vec(),
         effort_limit: robot.effort_limit.to_vec(),
         action_clip: env.action_clip,

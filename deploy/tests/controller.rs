@@ -623,3 +623,34 @@ fn physically_absurd_states_are_not_believed() {
     flying.base_lin_vel = [1e4, 0.0, 0.0];
     assert!(plausible_state(&flying, &io).unwrap_err().contains("m/s"));
 }
+
+#[test]
+fn the_contract_carries_the_gains_the_policy_was_trained_around() {
+    let robot = a1();
+    let io = a1_io();
+    assert!(
+        io.kp
+            .iter()
+            .all(|k| (k - robot.training_gains.kp).abs() < 1e-4)
+    );
+    assert!(
+        io.kd
+            .iter()
+            .all(|k| (k - robot.training_gains.kd).abs() < 1e-5)
+    );
+    // A config that trains stiffer (kp ≈ 40, kd ≈ 1 for A1's 25 / 0.5) deploys stiffer.
+    let mut env = flat_env();
+    env.randomization.kp_scale = Some([1.36, 1.84]);
+    env.randomization.kd_scale = Some([1.7, 2.3]);
+    let io = robot_io(robot, &env).unwrap();
+    assert!(
+        io.kp
+            .iter()
+            .all(|k| (k - 1.6 * robot.training_gains.kp).abs() < 1e-3)
+    );
+    assert!(
+        io.kd
+            .iter()
+            .all(|k| (k - 2.0 * robot.training_gains.kd).abs() < 1e-4)
+    );
+}
