@@ -637,6 +637,10 @@ pub async fn run(
         }
 
         let iteration_seconds = waited + iteration_start.elapsed().as_secs_f64();
+        // The next gather (its wait and its timeout) starts now that the policy is out, not when
+        // this update began: counting the update in both made `iteration_seconds` (and so
+        // samples/s and `l3p bench train`) count every update twice.
+        gather.restart(now_s());
         let decode = decode_seconds
             .lock()
             .map(|mut d| std::mem::take(&mut *d))

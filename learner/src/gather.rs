@@ -137,6 +137,12 @@ impl Gather {
         (chunks, newly_silent)
     }
 
+    /// Starts the current gather's clock (its wait and its timeout) at `now_s`: the daemon calls it
+    /// when the update that followed [`Gather::take`] has published its policy.
+    pub fn restart(&mut self, now_s: f64) {
+        self.started_s = now_s;
+    }
+
     /// Seconds since the current gather started.
     pub fn waited_s(&self, now_s: f64) -> f64 {
         now_s - self.started_s
@@ -232,6 +238,24 @@ mod tests {
         assert_eq!(chunks.len(), 1);
         assert_eq!(silent, ["go1/b"]);
         assert_eq!(g.waited_s(42.0), 1.0, "the next gather starts at the take");
+    }
+
+    #[test]
+    fn the_timeout_counts_from_the_restart_after_the_update() {
+        let mut g = two_actors(0.0);
+        g.chunk(chunk("a1", "a", 0), 0);
+        g.chunk(chunk("go1", "b", 0), 0);
+        g.take(Ready::Everyone, 1.0);
+        // The update takes 30 s; the daemon restarts the clock once the policy is out.
+        g.restart(31.0);
+        assert_eq!(g.waited_s(32.0), 1.0);
+        g.chunk(chunk("a1", "a", 1), 1);
+        assert_eq!(
+            g.ready(60.0, false),
+            None,
+            "the 30 s timeout counts 29 s since the restart (59 s since the take)"
+        );
+        assert_eq!(g.ready(61.5, false), Some(Ready::TimedOut));
     }
 
     #[test]
