@@ -4,7 +4,13 @@
     python3 numpy_policy.py <export dir or policy.safetensors> [observations.json]
 
 Reads a JSON list of observations (each `obs_dim` floats; stdin when no file is given) and prints
-a JSON list of action means. Joint targets for the robot: q* = default + action_scale * clip(a).
+a JSON list of action means. Each control period a controller then (see config["io"]):
+  - filters the action: a = a_prev + alpha * (clip(raw) - a_prev), a_prev = 0 at start
+    (`filtered_action`; alpha = io["action_filter_alpha"], 1 = no filter); `a` is also the next
+    observation's `last_action`;
+  - sends joint targets q* = default + action_scale * a (`joint_targets`);
+  - with io["gait_clock_hz"] > 0, appends the clock's [sin, cos] to the observation (`gait_clock`,
+    ticks = policy steps since the policy took over).
 """
 import json
 import struct
@@ -41,6 +47,22 @@ def act(config, tensors, obs):
         if layer["activation"] == "elu":
             x = np.where(x > 0, x, np.expm1(np.minimum(x, 0)))
     return x
+
+
+def filtered_action(config, previous, raw):
+    """The applied action: the raw output clipped, then low-pass filtered against the previous one."""
+    io = config["io"]
+    alpha = io.get("action_filter_alpha", 1.0)
+    a = np.clip(np.nan_to_num(raw, nan=0.0), -io["action_clip"], io["action_clip"])
+    return previous + alpha * (a - previous)
+
+
+def gait_clock(config, ticks):
+    """The `gait_clock` observation segment after `ticks` policy steps: [sin 2*pi*phi, cos 2*pi*phi]."""
+    io = config["io"]
+    cycles = ticks * float(io.get("gait_clock_hz", 0.0)) * float(np.float32(io["control_dt"]))
+    phase = cycles - np.floor(cycles)
+    return np.array([np.sin(2 * np.pi * phase), np.cos(2 * np.pi * phase)], dtype=np.float32)
 
 
 def joint_targets(config, actions):
