@@ -9,7 +9,7 @@ use l3p_policy::RobotIo;
 use l3p_proto::{ControlMode, OperatorAction, RobotState};
 use l3p_robots::catalog::RobotSpec;
 use l3p_robots::config::{EnvConfig, TerrainPreset};
-use l3p_robots::task::{Task, TaskEnvState, quat_from_yaw, quat_rotate_inverse};
+use l3p_robots::task::{Task, TaskEnvState, quat_from_yaw_and_tilt, quat_rotate_inverse};
 use l3p_robots::terrain::Terrain;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -89,23 +89,13 @@ fn observation_matches_with_clock(gait_clock_hz: f32) {
     let mut rng = StdRng::seed_from_u64(3);
     for _ in 0..20 {
         let mut sim = l3p_robots::task::RobotState::default();
-        sim.base_quat = quat_from_yaw(rng.random_range(-3.0..3.0));
-        // Add some roll/pitch too: q = yaw ⊗ small tilt, normalised.
+        let yaw = rng.random_range(-3.0..3.0);
+        // Some roll and pitch too.
         let (r, p) = (
             rng.random_range(-0.3f32..0.3),
             rng.random_range(-0.3f32..0.3),
         );
-        let q = sim.base_quat;
-        let t = [1.0, 0.5 * r, 0.5 * p, 0.0];
-        let mut m = [
-            q[0] * t[0] - q[1] * t[1] - q[2] * t[2] - q[3] * t[3],
-            q[0] * t[1] + q[1] * t[0] + q[2] * t[3] - q[3] * t[2],
-            q[0] * t[2] - q[1] * t[3] + q[2] * t[0] + q[3] * t[1],
-            q[0] * t[3] + q[1] * t[2] - q[2] * t[1] + q[3] * t[0],
-        ];
-        let n = m.iter().map(|v| v * v).sum::<f32>().sqrt();
-        m.iter_mut().for_each(|v| *v /= n);
-        sim.base_quat = m;
+        sim.base_quat = quat_from_yaw_and_tilt(yaw, r, p);
         for k in 0..3 {
             sim.base_lin_vel_w[k] = rng.random_range(-1.0..1.0);
             sim.base_ang_vel_w[k] = rng.random_range(-2.0..2.0);

@@ -181,6 +181,22 @@ pub fn quat_from_yaw(yaw: f32) -> [f32; 4] {
     [c, 0.0, 0.0, s]
 }
 
+/// Quaternion of a rotation by `yaw` about z followed (in the body frame) by a small roll and pitch
+/// (rad): `q_yaw ⊗ normalise(1, roll/2, pitch/2, 0)`, exact to first order in the tilt angles.
+pub fn quat_from_yaw_and_tilt(yaw: f32, roll: f32, pitch: f32) -> [f32; 4] {
+    let q = quat_from_yaw(yaw);
+    let t = [1.0, 0.5 * roll, 0.5 * pitch, 0.0];
+    let mut m = [
+        q[0] * t[0] - q[1] * t[1] - q[2] * t[2] - q[3] * t[3],
+        q[0] * t[1] + q[1] * t[0] + q[2] * t[3] - q[3] * t[2],
+        q[0] * t[2] - q[1] * t[3] + q[2] * t[0] + q[3] * t[1],
+        q[0] * t[3] + q[1] * t[2] - q[2] * t[1] + q[3] * t[0],
+    ];
+    let n = m.iter().map(|v| v * v).sum::<f32>().sqrt();
+    m.iter_mut().for_each(|v| *v /= n);
+    m
+}
+
 // ---------------------------------------------------------------------------------------------
 // Per-robot parameters
 
@@ -1288,6 +1304,18 @@ mod tests {
         assert_eq!(clipped.terms, r.terms);
     }
 
+    /// A freshly reset env commanded to walk forward at 0.5 m/s for 10 s.
+    fn commanded_half_speed(task: &Task, st: &RobotState, rng: &mut StdRng) -> TaskEnvState {
+        let mut env = TaskEnvState::new();
+        task.reset_env(&mut env, st, [0.0; 3], rng);
+        env.command = Command {
+            vx: 0.5,
+            time_left: 10.0,
+            ..Default::default()
+        };
+        env
+    }
+
     #[test]
     fn gait_terms_match_hand_computation() {
         let mut cfg = EnvConfig::default(); // the l3p recipe
@@ -1303,13 +1331,7 @@ mod tests {
         let dt = 0.02;
         let mut rng = StdRng::seed_from_u64(3);
         let mut st = standing_state();
-        let mut env = TaskEnvState::new();
-        task.reset_env(&mut env, &st, [0.0; 3], &mut rng);
-        env.command = Command {
-            vx: 0.5,
-            time_left: 10.0,
-            ..Default::default()
-        };
+        let mut env = commanded_half_speed(&task, &st, &mut rng);
         // Crouched at 0.18 m (standing 0.30): (0.18 − 0.30)² = 0.0144.
         st.base_pos[2] = 0.18;
         // Trot pattern: FL + RR down, FR + RL up.
@@ -1367,13 +1389,7 @@ mod tests {
         task.spec.noise.enabled = false;
         let mut rng = StdRng::seed_from_u64(3);
         let mut st = standing_state();
-        let mut env = TaskEnvState::new();
-        task.reset_env(&mut env, &st, [0.0; 3], &mut rng);
-        env.command = Command {
-            vx: 0.5,
-            time_left: 10.0,
-            ..Default::default()
-        };
+        let mut env = commanded_half_speed(&task, &st, &mut rng);
         let mut obs = vec![0.0; task.obs_dim()];
         task.observe(&env, &st, &terrain, &mut rng, &mut obs)
             .unwrap();

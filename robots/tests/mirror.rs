@@ -5,7 +5,7 @@ use l3p_robots::catalog::RobotSpec;
 use l3p_robots::config::{EnvConfig, TerrainPreset};
 use l3p_robots::mirror::{SignedPermutation, TaskMirror, observation_mirror};
 use l3p_robots::task::{
-    Command, RobotState, Task, TaskEnvState, gait_clock_observation, quat_from_yaw,
+    Command, RobotState, Task, TaskEnvState, gait_clock_observation, quat_from_yaw_and_tilt,
 };
 use l3p_robots::terrain::Terrain;
 use rand::rngs::StdRng;
@@ -122,18 +122,7 @@ fn a_mirrored_state_is_observed_as_the_mirrored_observation() {
             rng.random_range(-0.2f32..0.2),
             rng.random_range(-0.2f32..0.2),
         ];
-        let y = quat_from_yaw(yaw);
-        // q = yaw ⊗ (small roll and pitch), normalised.
-        let t = [1.0, 0.5 * tilt[0], 0.5 * tilt[1], 0.0];
-        let mut q = [
-            y[0] * t[0] - y[3] * t[3] - y[1] * t[1] - y[2] * t[2],
-            y[0] * t[1] + y[1] * t[0] + y[2] * t[3] - y[3] * t[2],
-            y[0] * t[2] - y[1] * t[3] + y[2] * t[0] + y[3] * t[1],
-            y[0] * t[3] + y[1] * t[2] - y[2] * t[1] + y[3] * t[0],
-        ];
-        let n = q.iter().map(|v| v * v).sum::<f32>().sqrt();
-        q.iter_mut().for_each(|v| *v /= n);
-        s.base_quat = q;
+        s.base_quat = quat_from_yaw_and_tilt(yaw, tilt[0], tilt[1]);
         s.base_pos = [
             rng.random_range(-2.0..2.0),
             rng.random_range(-2.0..2.0),
