@@ -87,6 +87,10 @@ pub struct LearnerBenchArgs {
     /// Timed updates (median reported, after one warm-up).
     #[arg(long, default_value_t = 2)]
     pub updates: usize,
+    /// Time this training config's networks and PPO settings instead of --mode/--hidden; the
+    /// observation and action sizes, envs and steps come from its env and first actor.
+    #[arg(long)]
+    pub config: Option<std::path::PathBuf>,
 }
 
 /// Terrain choices for the benchmark.
@@ -212,7 +216,7 @@ fn bench_train_in(a: &TrainBenchArgs, scratch: &std::path::Path) -> anyhow::Resu
 }
 
 fn learner(a: LearnerBenchArgs) -> anyhow::Result<()> {
-    let cfg = l3p_learner::bench::LearnerBenchConfig {
+    let mut cfg = l3p_learner::bench::LearnerBenchConfig {
         mode: a.mode.parse()?,
         envs: a.envs,
         steps: a.steps,
@@ -222,11 +226,28 @@ fn learner(a: LearnerBenchArgs) -> anyhow::Result<()> {
         updates: a.updates,
         seed: 1,
         threads: a.threads,
+        from_config: None,
     };
+    let mut what = format!("mode {} hidden {:?}", a.mode, a.hidden);
+    if let Some(path) = &a.config {
+        let config = crate::config::Config::load(path)?;
+        let actor = config
+            .actors
+            .first()
+            .ok_or_else(|| anyhow::anyhow!("{} has no [[actors]]", path.display()))?;
+        let spec = l3p_robots::catalog::RobotSpec::by_name(&actor.robot)?;
+        cfg.obs_dim = config.env.obs_dim();
+        cfg.action_dim = spec.joint_names.len();
+        cfg.envs = actor.envs;
+        cfg.steps = config.rollout.steps_per_env;
+        cfg.mode = config.ppo.mode;
+        cfg.from_config = Some((config.model.clone(), config.ppo.clone()));
+        what = format!("{} ({})", path.display(), config.ppo.mode.as_str());
+    }
     let r = l3p_learner::bench::run_learner_bench(&cfg)?;
     println!(
-        "bench learner: mode {} obs {} hidden {:?} envs {} x {} steps threads {} (actor params {})",
-        a.mode, a.obs, a.hidden, a.envs, a.steps, a.threads, r.actor_params
+        "bench learner: {what} obs {} envs {} x {} steps threads {} (actor params {})",
+        cfg.obs_dim, cfg.envs, cfg.steps, a.threads, r.actor_params
     );
     println!(
         "  update (5 epochs x 4 minibatches): {:.3} s, {:.0} samples/s",
@@ -234,7 +255,7 @@ fn learner(a: LearnerBenchArgs) -> anyhow::Result<()> {
     );
     println!(
         "  inference, batch {}: burn {:.0} obs/s, pure-Rust export {:.0} obs/s",
-        a.envs, r.infer_burn_obs_per_second, r.infer_rust_obs_per_second
+        cfg.envs, r.infer_burn_obs_per_second, r.infer_rust_obs_per_second
     );
     Ok(())
 }

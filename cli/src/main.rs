@@ -46,6 +46,7 @@ enum Command {
 }
 
 fn main() -> anyhow::Result<()> {
+    keep_large_allocations_on_the_heap();
     logging::init();
     let cli = Cli::parse();
     match cli.command {
@@ -65,3 +66,30 @@ fn main() -> anyhow::Result<()> {
         Command::Export(args) => l3p_cli::deploy_cmd::export(args),
     }
 }
+
+/// glibc serves allocations above its mmap threshold (128 KiB, adapting upwards) with fresh `mmap`s
+/// and returns them on `free`, so every PPO minibatch's tensors (0.2–25 MB) page-faulted in anew:
+/// 10% of an update's time went to the kernel, and the learner update ran ×1.2–1.3 faster with the
+/// threshold raised (BENCHMARKS.md). 32 MiB is glibc's largest allowed threshold on 64-bit; the
+/// trim threshold keeps freed heap memory for reuse instead of returning it at once.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+#[allow(unsafe_code)]
+fn keep_large_allocations_on_the_heap() {
+    const M_TRIM_THRESHOLD: i32 = -1;
+    const M_MMAP_THRESHOLD: i32 = -3;
+    unsafe extern "C" {
+        fn mallopt(param: i32, value: i32) -> i32;
+    }
+    // An explicit GLIBC_TUNABLES setting wins.
+    if std::env::var_os("GLIBC_TUNABLES").is_some() {
+        return;
+    }
+    // SAFETY: `mallopt` only sets allocator parameters; it is called before any other thread runs.
+    unsafe {
+        mallopt(M_MMAP_THRESHOLD, 32 << 20);
+        mallopt(M_TRIM_THRESHOLD, 256 << 20);
+    }
+}
+
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+fn keep_large_allocations_on_the_heap() {}

@@ -27,6 +27,9 @@ pub struct LearnerBenchConfig {
     pub seed: u64,
     /// rayon threads for burn's kernels (0: rayon's default).
     pub threads: usize,
+    /// A training config's networks and PPO settings, timed as they are (`mode` and `hidden` are then
+    /// ignored): what `l3p bench learner --config configs/a1-flat.toml` measures.
+    pub from_config: Option<(PolicyConfig, PpoConfig)>,
 }
 
 impl Default for LearnerBenchConfig {
@@ -41,6 +44,7 @@ impl Default for LearnerBenchConfig {
             updates: 2,
             seed: 1,
             threads: 2,
+            from_config: None,
         }
     }
 }
@@ -99,37 +103,40 @@ pub fn run_learner_bench(cfg: &LearnerBenchConfig) -> Result<LearnerBenchReport,
 
 fn bench_in_pool(cfg: &LearnerBenchConfig) -> Result<LearnerBenchReport, LearnerError> {
     let device = train_device();
-    let policy = PolicyConfig {
-        arch: cfg.mode.arch(),
-        mlp_hidden: cfg.hidden.clone(),
-        critic_hidden: cfg.hidden.clone(),
-        ..PolicyConfig::default()
-    };
-    let spec = RobotSpec::new("bench", cfg.obs_dim, cfg.action_dim);
-    let actor_params = policy.actor_params(cfg.obs_dim, cfg.action_dim);
-    let model = crate::init_model(
-        if cfg.mode.arch() == Arch::Mlp {
+    // From-scratch modes only: a transfer mode needs a checkpoint to start from.
+    let from_scratch = |m: Mode| {
+        if m.arch() == Arch::Mlp {
             Mode::Mlp
         } else {
             Mode::L3p
-        },
-        policy,
-        vec![spec],
-        None,
-        &device,
-    )?;
-    let mut ppo = Ppo::new(
-        PpoConfig {
-            mode: if cfg.mode.arch() == Arch::Mlp {
-                Mode::Mlp
-            } else {
-                Mode::L3p
+        }
+    };
+    let mode = from_scratch(cfg.mode);
+    let (policy, ppo_cfg) = match &cfg.from_config {
+        Some((policy, ppo)) => (
+            policy.clone(),
+            PpoConfig {
+                mode: from_scratch(ppo.mode),
+                ..ppo.clone()
             },
-            ..Default::default()
-        },
-        model,
-        device,
-    )?;
+        ),
+        None => (
+            PolicyConfig {
+                arch: mode.arch(),
+                mlp_hidden: cfg.hidden.clone(),
+                critic_hidden: cfg.hidden.clone(),
+                ..PolicyConfig::default()
+            },
+            PpoConfig {
+                mode,
+                ..Default::default()
+            },
+        ),
+    };
+    let spec = RobotSpec::new("bench", cfg.obs_dim, cfg.action_dim);
+    let actor_params = policy.actor_params(cfg.obs_dim, cfg.action_dim);
+    let model = crate::init_model(ppo_cfg.mode, policy, vec![spec], None, &device)?;
+    let mut ppo = Ppo::new(ppo_cfg, model, device)?;
     let mut rng = StdRng::seed_from_u64(cfg.seed);
     let batch = synthetic_batch(cfg, &mut rng);
     ppo.update(&batch)?; // warm-up
