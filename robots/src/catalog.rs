@@ -188,7 +188,9 @@ fn anymal(
         foot_links: ANYMAL_FEET,
         penalised_links: ANYMAL_PENALISED,
         termination_links: &["base"],
-        training_gains: Gains { kp: 40.0, kd: 5.0 },
+        // legged_gym's ANYmal PD (without its actuator net): IsaacLab's simple-actuator kp 40 / kd 5
+        // let the 50-57 kg robots sag to 80% of standing with zero actions (robots/tests/vecenv.rs).
+        training_gains: Gains { kp: 80.0, kd: 2.0 },
         stand_gains: Gains { kp: 300.0, kd: 8.0 },
         effort_limit: [80.0; NUM_JOINTS],
         saturation_effort: [120.0; NUM_JOINTS],
