@@ -9,8 +9,9 @@
 //! Values and sources (see `reference/locomotion-env-and-ppo.md` §1.8 and `robots/NOTES.md`):
 //! default poses and action scales are IsaacLab 2.1's; training gains are IsaacLab 2.1's DC-motor gains
 //! for A1/Go2, the same PD for Go1 (IsaacLab uses an actuator net; walk-these-ways reports it mainly
-//! adds ~0.2 damping, which we add), the ANYdrive DC-motor substitute (kp 40, kd 5, saturation 120 N·m,
-//! effort 80 N·m, 7.5 rad/s) for ANYmal B/C/D (IsaacLab uses an LSTM actuator net), and IsaacLab's
+//! adds ~0.2 damping, which we add), legged_gym's ANYmal PD (kp 80, kd 2) with IsaacLab's ANYdrive limits
+//! (saturation 120 N·m, effort 80 N·m, 7.5 rad/s) for ANYmal B/C/D (IsaacLab uses an LSTM actuator
+//! net; its DC-motor substitute, kp 40 / kd 5, let them sag to 80% of standing), and IsaacLab's
 //! Spot PD (kp 60, kd 1.5). Stand-test gains are stiff gains for the standing check only.
 
 use crate::model::RobotModel;
