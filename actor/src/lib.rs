@@ -513,7 +513,7 @@ pub async fn run<E: RolloutEnv>(
 }
 
 /// What `l3p eval` reports: means over finished episodes.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EvalSummary {
     pub episodes: usize,
     pub episode_return: f32,

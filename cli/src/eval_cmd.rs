@@ -140,7 +140,7 @@ pub fn load_policy(reference: &str, data_dir: &Path) -> anyhow::Result<DeployPol
 }
 
 /// One evaluation: settings in, tracking + gait + walk verdict out.
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EvalRow {
     /// Forward speed command (m/s), or `None` for the config's command distribution.
     pub forward: Option<f32>,

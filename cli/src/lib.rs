@@ -8,6 +8,8 @@ pub mod config;
 pub mod config_cmd;
 pub mod deploy_cmd;
 pub mod eval_cmd;
+pub mod experiment;
+pub mod experiment_cmd;
 pub mod learner_cmd;
 pub mod metrics_cmd;
 pub mod registry_cmd;

@@ -43,6 +43,7 @@ enum Command {
     Export(l3p_cli::deploy_cmd::ExportArgs),
     /// Check a TOML config file: parse it strictly and print the resolved values.
     Config(l3p_cli::config_cmd::ConfigArgs),
+    Experiment(l3p_cli::experiment_cmd::ExperimentArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -60,6 +61,7 @@ fn main() -> anyhow::Result<()> {
         Command::Registry(args) => l3p_cli::registry_cmd::run(args),
         Command::Robots(args) => l3p_cli::robots_cmd::run(args),
         Command::Bench(args) => l3p_cli::bench_cmd::run(args),
+        Command::Experiment(args) => l3p_cli::experiment_cmd::run(args),
         Command::Deploy(args) => l3p_cli::deploy_cmd::deploy(args),
         Command::SimRobot(args) => l3p_cli::deploy_cmd::sim_robot(args),
         Command::Operate(args) => l3p_cli::deploy_cmd::operate(args),

@@ -1,7 +1,7 @@
 //! Training reports from a run's metrics file: curves as SVG and the paper-style convergence row.
 //!
 //! Main items: [`load_learner_records`], [`series`], [`smooth`], [`convergence_iteration`],
-//! [`ReportRow`] (`ReportRow::from_records`), [`svg_chart`].
+//! [`ReportRow`] (`ReportRow::from_records`), [`svg_chart`], [`svg_bands`] (curves over seeds).
 //!
 //! Convergence (DESIGN §6): the first iteration at which the smoothed curve reaches a fraction of its
 //! final value. Rewards can be negative, so "85% of the final value" is measured over the range the
@@ -122,6 +122,107 @@ impl ReportRow {
     }
 }
 
+/// The plot area of a chart: pixel geometry and the data range it maps.
+struct Frame {
+    x0: f64,
+    x1: f64,
+    y0: f64,
+    y1: f64,
+}
+
+const W: f64 = 720.0;
+const H: f64 = 360.0;
+const LEFT: f64 = 70.0;
+const RIGHT: f64 = 20.0;
+const TOP: f64 = 40.0;
+const BOTTOM: f64 = 50.0;
+
+impl Frame {
+    /// The range of the finite points (a unit range where there are none or they coincide).
+    fn around(points: impl Iterator<Item = (f64, f64)>) -> Self {
+        let mut f = Frame {
+            x0: f64::INFINITY,
+            x1: f64::NEG_INFINITY,
+            y0: f64::INFINITY,
+            y1: f64::NEG_INFINITY,
+        };
+        for (x, y) in points.filter(|p| p.0.is_finite() && p.1.is_finite()) {
+            f.x0 = f.x0.min(x);
+            f.x1 = f.x1.max(x);
+            f.y0 = f.y0.min(y);
+            f.y1 = f.y1.max(y);
+        }
+        if !f.x0.is_finite() {
+            (f.x0, f.x1, f.y0, f.y1) = (0.0, 1.0, 0.0, 1.0);
+        }
+        if f.x1 - f.x0 < 1e-9 {
+            f.x1 = f.x0 + 1.0;
+        }
+        if f.y1 - f.y0 < 1e-9 {
+            f.y1 = f.y0 + 1.0;
+        }
+        f
+    }
+
+    fn sx(&self, x: f64) -> f64 {
+        LEFT + (x - self.x0) / (self.x1 - self.x0) * (W - LEFT - RIGHT)
+    }
+
+    fn sy(&self, y: f64) -> f64 {
+        TOP + (1.0 - (y - self.y0) / (self.y1 - self.y0)) * (H - TOP - BOTTOM)
+    }
+
+    /// SVG `points` of the finite points.
+    fn path(&self, points: impl Iterator<Item = (f64, f64)>) -> String {
+        points
+            .filter(|p| p.0.is_finite() && p.1.is_finite())
+            .map(|p| format!("{:.1},{:.1}", self.sx(p.0), self.sy(p.1)))
+            .collect::<Vec<_>>()
+            .join(" ")
+    }
+
+    /// The document up to the plotted lines: title, box, ticks, axis labels.
+    fn open(&self, title: &str, y_label: &str) -> String {
+        let mut svg = format!(
+            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{W}\" height=\"{H}\" font-family=\"sans-serif\" font-size=\"12\">\n\
+             <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
+             <text x=\"{}\" y=\"22\" font-size=\"15\" text-anchor=\"middle\">{}</text>\n\
+             <rect x=\"{LEFT}\" y=\"{TOP}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"#888\"/>\n",
+            W / 2.0,
+            escape(title),
+            W - LEFT - RIGHT,
+            H - TOP - BOTTOM
+        );
+        for i in 0..=4 {
+            let fy = self.y0 + (self.y1 - self.y0) * i as f64 / 4.0;
+            let fx = self.x0 + (self.x1 - self.x0) * i as f64 / 4.0;
+            svg.push_str(&format!(
+                "<text x=\"{}\" y=\"{:.1}\" text-anchor=\"end\">{fy:.3}</text>\n<text x=\"{:.1}\" y=\"{}\" text-anchor=\"middle\">{fx:.0}</text>\n",
+                LEFT - 6.0,
+                self.sy(fy) + 4.0,
+                self.sx(fx),
+                H - BOTTOM + 18.0
+            ));
+        }
+        svg.push_str(&format!(
+            "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">iteration</text>\n\
+             <text x=\"16\" y=\"{}\" transform=\"rotate(-90 16 {})\" text-anchor=\"middle\">{}</text>\n",
+            (LEFT + W - RIGHT) / 2.0,
+            H - 10.0,
+            H / 2.0,
+            H / 2.0,
+            escape(y_label),
+        ));
+        svg
+    }
+}
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+}
+
 /// A line chart as a standalone SVG document: raw values faint, smoothed values bold.
 pub fn svg_chart(
     title: &str,
@@ -129,76 +230,51 @@ pub fn svg_chart(
     raw: &[(f64, f64)],
     smoothed: &[(f64, f64)],
 ) -> String {
-    let (w, h, left, right, top, bottom) = (720.0, 360.0, 70.0, 20.0, 40.0, 50.0);
-    let finite: Vec<&(f64, f64)> = raw
-        .iter()
-        .filter(|p| p.0.is_finite() && p.1.is_finite())
-        .collect();
-    let (mut x0, mut x1, mut y0, mut y1) = (0.0f64, 1.0f64, 0.0f64, 1.0f64);
-    if let Some(first) = finite.first() {
-        (x0, x1, y0, y1) = (first.0, first.0, first.1, first.1);
-        for p in &finite {
-            x0 = x0.min(p.0);
-            x1 = x1.max(p.0);
-            y0 = y0.min(p.1);
-            y1 = y1.max(p.1);
-        }
-    }
-    if x1 - x0 < 1e-9 {
-        x1 = x0 + 1.0;
-    }
-    if y1 - y0 < 1e-9 {
-        y1 = y0 + 1.0;
-    }
-    let sx = |x: f64| left + (x - x0) / (x1 - x0) * (w - left - right);
-    let sy = |y: f64| top + (1.0 - (y - y0) / (y1 - y0)) * (h - top - bottom);
-    let path = |points: &[(f64, f64)]| {
-        points
+    let frame = Frame::around(raw.iter().copied());
+    let mut svg = frame.open(title, y_label);
+    svg.push_str(&format!(
+        "<polyline fill=\"none\" stroke=\"#9ecae1\" stroke-width=\"1\" points=\"{}\"/>\n\
+         <polyline fill=\"none\" stroke=\"#08519c\" stroke-width=\"2\" points=\"{}\"/>\n</svg>\n",
+        frame.path(raw.iter().copied()),
+        frame.path(smoothed.iter().copied())
+    ));
+    svg
+}
+
+/// Several curves with spread, overlaid: for each `(label, points)` with points `(x, mean, lo,
+/// hi)`, the mean as a line over a translucent lo–hi band, and a legend.
+pub fn svg_bands(
+    title: &str,
+    y_label: &str,
+    lines: &[(String, Vec<(f64, f64, f64, f64)>)],
+) -> String {
+    const COLOURS: [&str; 6] = [
+        "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
+    ];
+    let frame = Frame::around(
+        lines
             .iter()
-            .filter(|p| p.0.is_finite() && p.1.is_finite())
-            .map(|p| format!("{:.1},{:.1}", sx(p.0), sy(p.1)))
-            .collect::<Vec<_>>()
-            .join(" ")
-    };
-    let escape = |s: &str| {
-        s.replace('&', "&amp;")
-            .replace('<', "&lt;")
-            .replace('>', "&gt;")
-    };
-    let mut svg = format!(
-        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w}\" height=\"{h}\" font-family=\"sans-serif\" font-size=\"12\">\n\
-         <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
-         <text x=\"{}\" y=\"22\" font-size=\"15\" text-anchor=\"middle\">{}</text>\n\
-         <rect x=\"{left}\" y=\"{top}\" width=\"{}\" height=\"{}\" fill=\"none\" stroke=\"#888\"/>\n",
-        w / 2.0,
-        escape(title),
-        w - left - right,
-        h - top - bottom
+            .flat_map(|(_, p)| p.iter().flat_map(|&(x, _, lo, hi)| [(x, lo), (x, hi)])),
     );
-    for i in 0..=4 {
-        let fy = y0 + (y1 - y0) * i as f64 / 4.0;
-        let fx = x0 + (x1 - x0) * i as f64 / 4.0;
+    let mut svg = frame.open(title, y_label);
+    for (k, (label, points)) in lines.iter().enumerate() {
+        let colour = COLOURS[k % COLOURS.len()];
+        let band = points
+            .iter()
+            .map(|&(x, _, _, hi)| (x, hi))
+            .chain(points.iter().rev().map(|&(x, _, lo, _)| (x, lo)));
         svg.push_str(&format!(
-            "<text x=\"{}\" y=\"{:.1}\" text-anchor=\"end\">{fy:.3}</text>\n<text x=\"{:.1}\" y=\"{}\" text-anchor=\"middle\">{fx:.0}</text>\n",
-            left - 6.0,
-            sy(fy) + 4.0,
-            sx(fx),
-            h - bottom + 18.0
+            "<polygon fill=\"{colour}\" fill-opacity=\"0.18\" stroke=\"none\" points=\"{}\"/>\n\
+             <polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"2\" points=\"{}\"/>\n\
+             <text x=\"{}\" y=\"{}\" fill=\"{colour}\">{}</text>\n",
+            frame.path(band),
+            frame.path(points.iter().map(|&(x, m, _, _)| (x, m))),
+            LEFT + 10.0,
+            TOP + 16.0 + 15.0 * k as f64,
+            escape(label)
         ));
     }
-    svg.push_str(&format!(
-        "<text x=\"{}\" y=\"{}\" text-anchor=\"middle\">iteration</text>\n\
-         <text x=\"16\" y=\"{}\" transform=\"rotate(-90 16 {})\" text-anchor=\"middle\">{}</text>\n\
-         <polyline fill=\"none\" stroke=\"#9ecae1\" stroke-width=\"1\" points=\"{}\"/>\n\
-         <polyline fill=\"none\" stroke=\"#08519c\" stroke-width=\"2\" points=\"{}\"/>\n</svg>\n",
-        (left + w - right) / 2.0,
-        h - 10.0,
-        h / 2.0,
-        h / 2.0,
-        escape(y_label),
-        path(raw),
-        path(smoothed)
-    ));
+    svg.push_str("</svg>\n");
     svg
 }
 

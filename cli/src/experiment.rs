@@ -1,0 +1,876 @@
+//! The paper's transfer experiment as data: an [`ExperimentSpec`] (one TOML file) expands by
+//! [`plan`] into [`Arm`]s — each an ordinary `l3p train` run with its own config file — and the
+//! results of finished arms aggregate into [`ArmResult`]s and the paper-layout [`Table`].
+//!
+//! Layout on disk (`<data_dir>/<name>/`): `arms/<arm>.toml` (the arm's full training config),
+//! `<arm>/` (its data directory: registry, `<arm>/` run directory with metrics and checkpoints),
+//! `<arm>/done.json` (written when the arm finished every iteration, with wall-clock and
+//! evaluations), `<arm>/failed.json` (the last failure), `<arm>/running.pid`, `logs/<arm>.log`.
+//!
+//! Pure logic only; `experiment_cmd` runs the processes.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use l3p_learner::Mode;
+use l3p_learner::report::ReportRow;
+use l3p_robots::config::TerrainPreset;
+use serde::{Deserialize, Serialize};
+
+use crate::config::{ActorSpec, Config};
+
+/// `experiments/<name>.toml`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExperimentSpec {
+    pub experiment: ExperimentSection,
+    pub pretrain: StageSpec,
+    pub targets: StageSpec,
+    #[serde(default)]
+    pub evaluation: EvaluationSpec,
+}
+
+/// `[experiment]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExperimentSection {
+    /// Experiment name: a single key segment; data goes under `<data_dir>/<name>/`.
+    pub name: String,
+    /// Training config every arm starts from (env, rewards, networks, PPO); paths are relative
+    /// to the working directory, as for every `l3p` command.
+    pub base_config: PathBuf,
+    #[serde(default = "default_data_dir")]
+    pub data_dir: PathBuf,
+    /// Seeds; every arm runs once per seed.
+    pub seeds: Vec<u64>,
+    /// Arms trained at once by `l3p experiment run` (each arm uses its actors' threads).
+    #[serde(default = "one")]
+    pub parallel: usize,
+    /// Environments per actor (default: the base config's first actor).
+    #[serde(default)]
+    pub envs: Option<usize>,
+    /// Simulator threads per actor (default: the base config's first actor).
+    #[serde(default)]
+    pub threads: Option<usize>,
+}
+
+fn default_data_dir() -> PathBuf {
+    PathBuf::from("l3p-data/experiments")
+}
+
+fn one() -> usize {
+    1
+}
+
+/// `[pretrain]` and `[targets]`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StageSpec {
+    /// Catalog robots. Pretraining with several robots trains one core on all of them at once
+    /// (one actor each); every target robot is its own arm.
+    pub robots: Vec<String>,
+    /// `mlp`, `l3p` (from scratch); targets also `mlp-transfer`, `l3p-transfer` (from the
+    /// pretraining arm of the same architecture and seed).
+    pub methods: Vec<Mode>,
+    pub iterations: u64,
+    /// Terrain preset (default: the base config's).
+    #[serde(default)]
+    pub terrain: Option<TerrainPreset>,
+}
+
+/// `[evaluation]`: how a finished arm's final policy is evaluated.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct EvaluationSpec {
+    /// Finished episodes per evaluation.
+    pub episodes: usize,
+    /// Parallel environments of an evaluation.
+    pub envs: usize,
+    /// Constant forward speeds evaluated with gait diagnostics (besides the training command mix).
+    pub forward: Vec<f32>,
+    pub seed: u64,
+}
+
+impl Default for EvaluationSpec {
+    fn default() -> Self {
+        Self {
+            episodes: 16,
+            envs: 16,
+            forward: vec![0.5, 1.0],
+            seed: 11,
+        }
+    }
+}
+
+impl ExperimentSpec {
+    pub fn load(path: &Path) -> anyhow::Result<Self> {
+        let spec: ExperimentSpec = l3p_proto::config::load_toml(path)?;
+        spec.validate()
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        Ok(spec)
+    }
+
+    /// Checks what would otherwise fail arms later; errors name the key.
+    pub fn validate(&self) -> Result<(), String> {
+        let e = &self.experiment;
+        l3p_proto::keys::validate_segment("experiment.name", &e.name).map_err(|x| x.to_string())?;
+        if e.seeds.is_empty() {
+            return Err("experiment.seeds is empty".into());
+        }
+        let mut seeds = e.seeds.clone();
+        seeds.sort_unstable();
+        seeds.dedup();
+        if seeds.len() != e.seeds.len() {
+            return Err(format!("experiment.seeds {:?} repeats a seed", e.seeds));
+        }
+        if e.parallel == 0 {
+            return Err("experiment.parallel = 0: expected >= 1".into());
+        }
+        if e.envs == Some(0) || e.threads == Some(0) {
+            return Err("experiment.envs and experiment.threads must be >= 1".into());
+        }
+        for (stage, s) in [("pretrain", &self.pretrain), ("targets", &self.targets)] {
+            if s.robots.is_empty() || s.methods.is_empty() {
+                return Err(format!(
+                    "{stage}.robots and {stage}.methods must not be empty"
+                ));
+            }
+            if s.iterations == 0 {
+                return Err(format!("{stage}.iterations = 0: expected >= 1"));
+            }
+            for r in &s.robots {
+                l3p_robots::catalog::RobotSpec::by_name(r)
+                    .map_err(|x| format!("{stage}.robots: {x}"))?;
+            }
+        }
+        for m in &self.pretrain.methods {
+            if !matches!(m, Mode::Mlp | Mode::L3p) {
+                return Err(format!(
+                    "pretrain.methods: {} is not a from-scratch method (mlp or l3p)",
+                    m.as_str()
+                ));
+            }
+        }
+        for m in &self.targets.methods {
+            if let Some(base) = transfer_source(*m)
+                && !self.pretrain.methods.contains(&base)
+            {
+                return Err(format!(
+                    "targets.methods has {} but pretrain.methods has no {}",
+                    m.as_str(),
+                    base.as_str()
+                ));
+            }
+        }
+        let ev = &self.evaluation;
+        if ev.episodes == 0 || ev.envs == 0 {
+            return Err("evaluation.episodes and evaluation.envs must be >= 1".into());
+        }
+        if ev.forward.iter().any(|v| !v.is_finite()) {
+            return Err(format!(
+                "evaluation.forward {:?}: speeds must be finite",
+                ev.forward
+            ));
+        }
+        Ok(())
+    }
+
+    /// `<data_dir>/<name>`.
+    pub fn dir(&self) -> PathBuf {
+        self.experiment.data_dir.join(&self.experiment.name)
+    }
+}
+
+/// The pretraining method a transfer method starts from.
+pub fn transfer_source(method: Mode) -> Option<Mode> {
+    match method {
+        Mode::MlpTransfer => Some(Mode::Mlp),
+        Mode::L3pTransfer => Some(Mode::L3p),
+        Mode::Mlp | Mode::L3p => None,
+    }
+}
+
+/// Which half of the experiment an arm belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Stage {
+    Pretrain,
+    Target,
+}
+
+/// One training run of the experiment.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Arm {
+    /// `pretrain-<method>-s<seed>` or `<robot>-<method>-s<seed>`; also the run name.
+    pub name: String,
+    pub stage: Stage,
+    pub robots: Vec<String>,
+    pub method: Mode,
+    pub seed: u64,
+    pub iterations: u64,
+    /// The pretraining arm whose final checkpoint this arm starts from.
+    pub depends_on: Option<String>,
+    /// The arm's complete training config (run name, seed, data dir, mode, actors, init_from).
+    pub config: Config,
+}
+
+impl Arm {
+    /// The arm's data directory (its `run.data_dir`).
+    pub fn data_dir(&self) -> &Path {
+        &self.config.run.data_dir
+    }
+
+    /// Where `l3p train` keeps this arm's metrics and checkpoints.
+    pub fn run_dir(&self) -> PathBuf {
+        self.data_dir().join(&self.name)
+    }
+
+    /// The `l3p train` invocation of this arm, given where its config file lives.
+    pub fn command(&self, config_file: &Path) -> Vec<String> {
+        vec![
+            "l3p".into(),
+            "train".into(),
+            config_file.display().to_string(),
+            "--quiet".into(),
+        ]
+    }
+}
+
+/// `<dir>/arms/<arm>.toml`.
+pub fn arm_config_path(dir: &Path, arm: &str) -> PathBuf {
+    dir.join("arms").join(format!("{arm}.toml"))
+}
+
+/// Expands the spec into arms: pretraining arms first (`pretrain.methods × seeds`), then targets
+/// (`targets.robots × targets.methods × seeds`), each transfer arm depending on the pretraining
+/// arm of its architecture and seed.
+pub fn plan(spec: &ExperimentSpec, base: &Config) -> anyhow::Result<Vec<Arm>> {
+    spec.validate().map_err(|e| anyhow::anyhow!(e))?;
+    let first = base.actors.first();
+    let envs = spec.experiment.envs.or(first.map(|a| a.envs)).unwrap_or(64);
+    let threads = spec
+        .experiment
+        .threads
+        .or(first.map(|a| a.threads))
+        .unwrap_or(1);
+    let dir = spec.dir();
+    let make = |name: String,
+                kind: Stage,
+                stage: &StageSpec,
+                robots: Vec<String>,
+                method: Mode,
+                seed: u64,
+                depends_on: Option<String>|
+     -> anyhow::Result<Arm> {
+        let mut config = base.clone();
+        config.run.name = name.clone();
+        config.run.seed = seed;
+        config.run.data_dir = dir.join(&name);
+        config.ppo.mode = method;
+        config.learner.max_iterations = stage.iterations;
+        config.learner.init_from = depends_on
+            .as_ref()
+            .map(|p| final_checkpoint(&dir.join(p).join(p)));
+        if let Some(t) = stage.terrain {
+            config.env.terrain = l3p_robots::config::TerrainConfig::with_preset(t);
+            config.env.height_scan = t != TerrainPreset::Flat;
+        }
+        config.actors = robots
+            .iter()
+            .map(|r| ActorSpec {
+                robot: r.clone(),
+                envs,
+                threads,
+            })
+            .collect();
+        config
+            .validate()
+            .map_err(|e| anyhow::anyhow!("arm {name}: {e}"))?;
+        Ok(Arm {
+            name,
+            stage: kind,
+            robots,
+            method,
+            seed,
+            iterations: stage.iterations,
+            depends_on,
+            config,
+        })
+    };
+    let mut arms = Vec::new();
+    for &seed in &spec.experiment.seeds {
+        for &method in &spec.pretrain.methods {
+            arms.push(make(
+                pretrain_arm_name(method, seed),
+                Stage::Pretrain,
+                &spec.pretrain,
+                spec.pretrain.robots.clone(),
+                method,
+                seed,
+                None,
+            )?);
+        }
+    }
+    for robot in &spec.targets.robots {
+        for &method in &spec.targets.methods {
+            for &seed in &spec.experiment.seeds {
+                let depends_on = transfer_source(method).map(|m| pretrain_arm_name(m, seed));
+                arms.push(make(
+                    format!("{}-{}-s{seed}", robot.replace('_', "-"), method.as_str()),
+                    Stage::Target,
+                    &spec.targets,
+                    vec![robot.clone()],
+                    method,
+                    seed,
+                    depends_on,
+                )?);
+            }
+        }
+    }
+    Ok(arms)
+}
+
+/// `pretrain-<method>-s<seed>`.
+pub fn pretrain_arm_name(method: Mode, seed: u64) -> String {
+    format!("pretrain-{}-s{seed}", method.as_str())
+}
+
+/// The checkpoint a run leaves behind (`<run_dir>/checkpoints/latest.ckpt`).
+pub fn final_checkpoint(run_dir: &Path) -> PathBuf {
+    l3p_learner::daemon::checkpoint_path(run_dir)
+}
+
+/// What `done.json` records about a finished arm.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ArmDone {
+    pub arm: String,
+    pub iterations: u64,
+    /// Wall-clock of the training process(es) of this arm, summed over resumptions.
+    pub wall_seconds: f64,
+    /// Final policy per robot: the training command mix, then each `evaluation.forward` speed.
+    pub evaluations: BTreeMap<String, Vec<crate::eval_cmd::EvalRow>>,
+    /// Transfer arms: the pretrained policy played on the target robot before any fine-tuning
+    /// (its own encoder/decoder: every catalog robot has the same observation and action layout).
+    #[serde(default)]
+    pub zero_shot: Option<Vec<crate::eval_cmd::EvalRow>>,
+}
+
+/// Where an arm stands, from its files.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ArmState {
+    Done(Box<ArmDone>),
+    /// A `running.pid` whose process is alive.
+    Running {
+        pid: u32,
+        iteration: u64,
+    },
+    /// Interrupted or failed: `iteration` reached so far, and the last failure if any.
+    Partial {
+        iteration: u64,
+        failure: Option<String>,
+    },
+    Pending,
+}
+
+/// Reads the state of `arm` from `<arm data dir>`.
+pub fn arm_state(arm: &Arm) -> ArmState {
+    let dir = arm.data_dir();
+    if let Ok(text) = std::fs::read_to_string(dir.join("done.json"))
+        && let Ok(done) = serde_json::from_str::<ArmDone>(&text)
+    {
+        return ArmState::Done(Box::new(done));
+    }
+    let iteration = last_iteration(&arm.run_dir());
+    if let Some(pid) = std::fs::read_to_string(dir.join("running.pid"))
+        .ok()
+        .and_then(|s| s.trim().parse::<u32>().ok())
+        && process_alive(pid)
+    {
+        return ArmState::Running { pid, iteration };
+    }
+    let failure = std::fs::read_to_string(dir.join("failed.json")).ok();
+    if iteration == 0 && failure.is_none() {
+        ArmState::Pending
+    } else {
+        ArmState::Partial { iteration, failure }
+    }
+}
+
+/// Whether a process with this id exists (Linux: `/proc/<pid>`).
+pub fn process_alive(pid: u32) -> bool {
+    Path::new(&format!("/proc/{pid}")).exists()
+}
+
+/// The last learner iteration in a run's metrics file (0 when none).
+pub fn last_iteration(run_dir: &Path) -> u64 {
+    l3p_learner::report::load_learner_records(&l3p_learner::daemon::metrics_path(run_dir))
+        .ok()
+        .and_then(|r| r.last().map(|r| r.iteration))
+        .unwrap_or(0)
+}
+
+/// One finished arm's numbers.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArmResult {
+    pub robot: String,
+    pub method: Mode,
+    pub seed: u64,
+    pub row: ReportRow,
+    pub wall_seconds: f64,
+    /// Tracking errors of the final policy under the training command mix (m/s, rad/s).
+    pub eval_lin_vel_error: f64,
+    pub eval_yaw_rate_error: f64,
+    pub eval_return: f64,
+    pub zero_shot_return: Option<f64>,
+}
+
+/// Mean and sample standard deviation (0 for one value); `None` when there are no values.
+pub fn mean_std(values: &[f64]) -> Option<(f64, f64)> {
+    let v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    let n = v.len() as f64;
+    let mean = v.iter().sum::<f64>() / n;
+    let var = if v.len() > 1 {
+        v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1.0)
+    } else {
+        0.0
+    };
+    Some((mean, var.sqrt()))
+}
+
+/// The paper's Table "Accuracy and Performance Comparison" (5 seeds, rough-terrain curriculum,
+/// IsaacLab): `(robot, method, level 85%, level 95%, final level, reward 85%, reward 95%, final
+/// reward)`; convergence in iterations.
+pub const PAPER_TABLE: &[(&str, &str, f64, f64, f64, f64, f64, f64)] = &[
+    ("a1", "mlp", 796.0, 1156.0, 5.88, 851.0, 1328.0, 22.04),
+    ("a1", "l3p", 760.0, 978.0, 5.77, 740.0, 1202.0, 23.16),
+    (
+        "a1",
+        "mlp-transfer",
+        648.0,
+        933.0,
+        5.98,
+        545.0,
+        1337.0,
+        24.56,
+    ),
+    (
+        "a1",
+        "l3p-transfer",
+        394.0,
+        462.0,
+        5.95,
+        179.0,
+        226.0,
+        24.36,
+    ),
+    ("go1", "mlp", 691.0, 975.0, 5.95, 463.0, 1238.0, 23.42),
+    ("go1", "l3p", 830.0, 1078.0, 5.78, 664.0, 1190.0, 23.14),
+    (
+        "go1",
+        "mlp-transfer",
+        591.0,
+        930.0,
+        5.85,
+        296.0,
+        1086.0,
+        23.45,
+    ),
+    (
+        "go1",
+        "l3p-transfer",
+        428.0,
+        512.0,
+        6.02,
+        181.0,
+        234.0,
+        24.45,
+    ),
+    ("go2", "mlp", 663.0, 1080.0, 6.10, 615.0, 1106.0, 26.19),
+    ("go2", "l3p", 780.0, 948.0, 5.76, 1015.0, 1291.0, 25.30),
+    (
+        "go2",
+        "mlp-transfer",
+        678.0,
+        890.0,
+        5.96,
+        672.0,
+        1140.0,
+        25.67,
+    ),
+    (
+        "go2",
+        "l3p-transfer",
+        412.0,
+        477.0,
+        6.08,
+        214.0,
+        279.0,
+        25.88,
+    ),
+    ("anymal_b", "mlp", 609.0, 825.0, 5.86, 292.0, 378.0, 9.57),
+    ("anymal_b", "l3p", 642.0, 917.0, 5.85, 313.0, 402.0, 9.85),
+    (
+        "anymal_b",
+        "mlp-transfer",
+        897.0,
+        1136.0,
+        5.84,
+        514.0,
+        848.0,
+        9.75,
+    ),
+    (
+        "anymal_b",
+        "l3p-transfer",
+        399.0,
+        459.0,
+        5.83,
+        147.0,
+        174.0,
+        13.20,
+    ),
+    ("anymal_c", "mlp", 499.0, 624.0, 6.10, 221.0, 299.0, 12.02),
+    ("anymal_c", "l3p", 569.0, 829.0, 6.07, 266.0, 357.0, 11.38),
+    (
+        "anymal_c",
+        "mlp-transfer",
+        817.0,
+        1035.0,
+        6.17,
+        457.0,
+        593.0,
+        10.55,
+    ),
+    (
+        "anymal_c",
+        "l3p-transfer",
+        401.0,
+        488.0,
+        5.99,
+        123.0,
+        154.0,
+        13.41,
+    ),
+    ("anymal_d", "mlp", 588.0, 803.0, 6.12, 307.0, 408.0, 11.28),
+    ("anymal_d", "l3p", 763.0, 1039.0, 6.03, 403.0, 945.0, 10.42),
+    (
+        "anymal_d",
+        "mlp-transfer",
+        1285.0,
+        1414.0,
+        5.28,
+        1233.0,
+        1431.0,
+        9.80,
+    ),
+    (
+        "anymal_d",
+        "l3p-transfer",
+        519.0,
+        695.0,
+        5.69,
+        172.0,
+        229.0,
+        11.49,
+    ),
+    ("spot", "mlp", 834.0, 1283.0, 3.54, 261.0, 389.0, 162.26),
+    ("spot", "l3p", 877.0, 936.0, 3.24, 258.0, 434.0, 160.40),
+    (
+        "spot",
+        "mlp-transfer",
+        897.0,
+        1344.0,
+        3.20,
+        429.0,
+        600.0,
+        135.26,
+    ),
+    (
+        "spot",
+        "l3p-transfer",
+        412.0,
+        864.0,
+        3.74,
+        171.0,
+        217.0,
+        181.99,
+    ),
+];
+
+/// The result table: one row per (robot, method), mean ± std over seeds, the paper's reward
+/// convergence beside ours.
+pub fn markdown_table(results: &[ArmResult]) -> String {
+    let mut groups: BTreeMap<(String, &'static str), Vec<&ArmResult>> = BTreeMap::new();
+    for r in results {
+        groups
+            .entry((r.robot.clone(), r.method.as_str()))
+            .or_default()
+            .push(r);
+    }
+    let fmt = |v: Option<(f64, f64)>, digits: usize| match v {
+        Some((m, s)) => format!("{m:.digits$} ± {s:.digits$}"),
+        None => "—".into(),
+    };
+    let conv = |rs: &[&ArmResult], f: &dyn Fn(&ReportRow) -> Option<u64>| {
+        let v: Vec<f64> = rs
+            .iter()
+            .filter_map(|r| f(&r.row))
+            .map(|x| x as f64)
+            .collect();
+        let reached = v.len();
+        let s = fmt(mean_std(&v), 0);
+        if reached < rs.len() {
+            format!("{s} ({reached}/{} reached)", rs.len())
+        } else {
+            s
+        }
+    };
+    let mut out = String::from(
+        "| robot | method | seeds | level 85% Cv. | level 95% Cv. | final level | reward 85% Cv. | reward 95% Cv. | final reward | xy-vel err (m/s) | yaw err (rad/s) | zero-shot return | wall (min) | paper reward 85% / 95% Cv. |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for ((robot, method), rs) in &groups {
+        let col = |f: &dyn Fn(&ArmResult) -> f64| -> Vec<f64> { rs.iter().map(|r| f(r)).collect() };
+        let paper = PAPER_TABLE
+            .iter()
+            .find(|p| p.0 == robot && p.1 == *method)
+            .map(|p| format!("{:.0} / {:.0}", p.5, p.6))
+            .unwrap_or_else(|| "—".into());
+        let zero: Vec<f64> = rs.iter().filter_map(|r| r.zero_shot_return).collect();
+        out.push_str(&format!(
+            "| {robot} | {method} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {paper} |\n",
+            rs.len(),
+            conv(rs, &|r| r.level_85),
+            conv(rs, &|r| r.level_95),
+            fmt(mean_std(&col(&|r| r.row.final_level)), 2),
+            conv(rs, &|r| r.reward_85),
+            conv(rs, &|r| r.reward_95),
+            fmt(mean_std(&col(&|r| r.row.final_reward)), 2),
+            fmt(mean_std(&col(&|r| r.eval_lin_vel_error)), 3),
+            fmt(mean_std(&col(&|r| r.eval_yaw_rate_error)), 3),
+            fmt(mean_std(&zero), 2),
+            fmt(mean_std(&col(&|r| r.wall_seconds / 60.0)), 1),
+        ));
+    }
+    out
+}
+
+/// Per-iteration mean and min/max over seeds of `key` (smoothed per seed), for one curve band.
+pub fn band(curves: &[Vec<(f64, f64)>]) -> Vec<(f64, f64, f64, f64)> {
+    let mut at: BTreeMap<u64, Vec<f64>> = BTreeMap::new();
+    for c in curves {
+        for &(x, y) in c {
+            if y.is_finite() {
+                at.entry(x as u64).or_default().push(y);
+            }
+        }
+    }
+    at.into_iter()
+        .filter(|(_, v)| v.len() == curves.len())
+        .map(|(x, v)| {
+            let mean = v.iter().sum::<f64>() / v.len() as f64;
+            let lo = v.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            (x as f64, mean, lo, hi)
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn spec(text: &str) -> ExperimentSpec {
+        let spec: ExperimentSpec = toml::from_str(text).unwrap();
+        spec
+    }
+
+    const MICRO: &str = r#"
+[experiment]
+name = "micro"
+base_config = "unused.toml"
+data_dir = "/tmp/exp"
+seeds = [1, 2]
+envs = 8
+[pretrain]
+robots = ["a1"]
+methods = ["mlp", "l3p"]
+iterations = 30
+[targets]
+robots = ["go1", "anymal_c"]
+methods = ["l3p", "l3p-transfer", "mlp-transfer"]
+iterations = 20
+terrain = "flat"
+"#;
+
+    fn base() -> Config {
+        let mut c = Config::default();
+        c.actors = vec![ActorSpec {
+            robot: "a1".into(),
+            envs: 64,
+            threads: 2,
+        }];
+        c
+    }
+
+    #[test]
+    fn plan_expands_pretraining_then_targets_with_their_dependencies() {
+        let arms = plan(&spec(MICRO), &base()).unwrap();
+        let names: Vec<&str> = arms.iter().map(|a| a.name.as_str()).collect();
+        assert_eq!(
+            &names[..4],
+            [
+                "pretrain-mlp-s1",
+                "pretrain-l3p-s1",
+                "pretrain-mlp-s2",
+                "pretrain-l3p-s2"
+            ]
+        );
+        assert_eq!(arms.len(), 4 + 2 * 3 * 2);
+        let t = arms
+            .iter()
+            .find(|a| a.name == "anymal-c-l3p-transfer-s2")
+            .unwrap();
+        assert_eq!(t.stage, Stage::Target);
+        assert_eq!(t.depends_on.as_deref(), Some("pretrain-l3p-s2"));
+        assert_eq!(t.config.ppo.mode, Mode::L3pTransfer);
+        assert_eq!(t.config.run.seed, 2);
+        assert_eq!(t.config.learner.max_iterations, 20);
+        assert_eq!(t.config.actors[0].robot, "anymal_c");
+        assert_eq!(
+            (t.config.actors[0].envs, t.config.actors[0].threads),
+            (8, 2)
+        );
+        assert_eq!(
+            t.config.learner.init_from.as_deref(),
+            Some(Path::new(
+                "/tmp/exp/micro/pretrain-l3p-s2/pretrain-l3p-s2/checkpoints/latest.ckpt"
+            ))
+        );
+        let m = arms
+            .iter()
+            .find(|a| a.name == "go1-mlp-transfer-s1")
+            .unwrap();
+        assert_eq!(m.depends_on.as_deref(), Some("pretrain-mlp-s1"));
+        let scratch = arms.iter().find(|a| a.name == "go1-l3p-s1").unwrap();
+        assert_eq!(scratch.depends_on, None);
+        assert_eq!(scratch.config.learner.init_from, None);
+        let p = &arms[0];
+        assert_eq!((p.stage, p.iterations), (Stage::Pretrain, 30));
+        assert_eq!(
+            p.config.run.data_dir,
+            Path::new("/tmp/exp/micro/pretrain-mlp-s1")
+        );
+        // Every arm's config survives the file it is written to.
+        for arm in &arms {
+            let text = toml::to_string(&arm.config).unwrap();
+            let back: Config = toml::from_str(&text).unwrap();
+            assert_eq!(back, arm.config, "{}", arm.name);
+        }
+    }
+
+    #[test]
+    fn bad_specs_are_refused_with_the_key_named() {
+        let cases = [
+            (MICRO.replace("seeds = [1, 2]", "seeds = [1, 1]"), "repeats"),
+            (
+                MICRO.replace("seeds = [1, 2]", "seeds = []"),
+                "experiment.seeds",
+            ),
+            (
+                MICRO.replace(r#"methods = ["mlp", "l3p"]"#, r#"methods = ["l3p"]"#),
+                "pretrain.methods has no mlp",
+            ),
+            (
+                MICRO.replace(
+                    r#"methods = ["mlp", "l3p"]"#,
+                    r#"methods = ["l3p-transfer"]"#,
+                ),
+                "not a from-scratch method",
+            ),
+            (MICRO.replace(r#""go1""#, r#""go7""#), "targets.robots"),
+            (
+                MICRO.replace("iterations = 20", "iterations = 0"),
+                "targets.iterations",
+            ),
+            (
+                MICRO.replace(r#"name = "micro""#, r#"name = "a/b""#),
+                "experiment.name",
+            ),
+        ];
+        for (text, want) in cases {
+            let err = spec(&text).validate().unwrap_err();
+            assert!(err.contains(want), "{want}: {err}");
+        }
+        assert!(toml::from_str::<ExperimentSpec>(&MICRO.replace("envs = 8", "envz = 8")).is_err());
+    }
+
+    #[test]
+    fn mean_std_and_bands_over_seeds() {
+        assert_eq!(mean_std(&[]), None);
+        assert_eq!(mean_std(&[2.0]), Some((2.0, 0.0)));
+        let (m, s) = mean_std(&[1.0, 2.0, 3.0, f64::NAN]).unwrap();
+        assert!((m - 2.0).abs() < 1e-12 && (s - 1.0).abs() < 1e-12);
+        let b = band(&[
+            vec![(1.0, 1.0), (2.0, 2.0), (3.0, 5.0)],
+            vec![(1.0, 3.0), (2.0, 4.0)],
+        ]);
+        // Iteration 3 is left out: only one seed reached it.
+        assert_eq!(b, vec![(1.0, 2.0, 1.0, 3.0), (2.0, 3.0, 2.0, 4.0)]);
+    }
+
+    fn result(
+        robot: &str,
+        method: Mode,
+        seed: u64,
+        reward_85: Option<u64>,
+        reward: f64,
+    ) -> ArmResult {
+        ArmResult {
+            robot: robot.into(),
+            method,
+            seed,
+            row: ReportRow {
+                iterations: 100,
+                level_85: None,
+                level_95: None,
+                reward_85,
+                reward_95: reward_85.map(|v| v + 10),
+                final_level: 0.0,
+                final_reward: reward,
+                lin_vel_error: 0.1,
+                yaw_rate_error: 0.2,
+            },
+            wall_seconds: 120.0,
+            eval_lin_vel_error: 0.15,
+            eval_yaw_rate_error: 0.25,
+            eval_return: reward,
+            zero_shot_return: (method == Mode::L3pTransfer).then_some(1.5),
+        }
+    }
+
+    #[test]
+    fn the_table_has_one_row_per_robot_and_method_with_the_spread_over_seeds() {
+        let table = markdown_table(&[
+            result("go1", Mode::L3pTransfer, 1, Some(40), 20.0),
+            result("go1", Mode::L3pTransfer, 2, Some(60), 22.0),
+            result("go1", Mode::Mlp, 1, Some(100), 18.0),
+            result("go1", Mode::Mlp, 2, None, 16.0),
+        ]);
+        let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("| go1")).collect();
+        assert_eq!(rows.len(), 2, "{table}");
+        let transfer = rows.iter().find(|r| r.contains("l3p-transfer")).unwrap();
+        // Reward 85%: mean 50 ± std 14 (sample std of 40, 60); final reward 21.00 ± 1.41; the
+        // paper's Go1 L3P-Transfer reward convergence 181 / 234.
+        assert!(transfer.contains("| 50 ± 14 |"), "{transfer}");
+        assert!(transfer.contains("| 21.00 ± 1.41 |"), "{transfer}");
+        assert!(transfer.contains("| 1.50 ± 0.00 |"), "{transfer}");
+        assert!(transfer.contains("| 181 / 234 |"), "{transfer}");
+        let mlp = rows.iter().find(|r| r.contains("| mlp |")).unwrap();
+        assert!(mlp.contains("100 ± 0 (1/2 reached)"), "{mlp}");
+        assert!(mlp.contains("| 2.0 ± 0.0 |"), "{mlp}"); // wall minutes
+    }
+}

@@ -1,0 +1,535 @@
+//! `l3p experiment plan|run|status|report <experiment.toml>`: the paper's transfer experiment as
+//! one command. `plan` writes every arm's config and prints it as the `l3p train` invocation it is
+//! (for a cluster scheduler); `run` trains the arms locally, `parallel` at a time, resumably
+//! (finished arms are skipped, an interrupted arm resumes from its checkpoint, a failed arm is
+//! reported and the others go on); `status` shows progress; `report` writes the table and curves.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use clap::{Args, Subcommand};
+use l3p_learner::report::{ReportRow, load_learner_records, series, smooth};
+
+use crate::config::Config;
+use crate::experiment::{
+    Arm, ArmDone, ArmResult, ArmState, ExperimentSpec, Stage, arm_config_path, arm_state, band,
+    markdown_table, plan,
+};
+
+#[derive(Debug, Args)]
+pub struct ExperimentArgs {
+    #[command(subcommand)]
+    pub command: ExperimentCommand,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum ExperimentCommand {
+    /// Write every arm's training config under `<data_dir>/<name>/arms/` and print the arms as
+    /// `l3p train` invocations, pretraining first (transfer arms need its checkpoints).
+    Plan(SpecArg),
+    /// Train every unfinished arm locally, `[experiment] parallel` at a time, then evaluate it.
+    Run(SpecArg),
+    /// Each arm's state: done (with wall-clock), running, partial (iteration reached, failure),
+    /// pending.
+    Status(SpecArg),
+    /// The result table (Markdown, mean ± std over seeds, the paper's numbers beside ours) and
+    /// per-robot learning curves (SVG, the methods overlaid) under `<data_dir>/<name>/report/`.
+    Report(ReportArg),
+}
+
+#[derive(Debug, Args)]
+pub struct SpecArg {
+    /// Experiment file, e.g. experiments/laptop.toml.
+    pub spec: PathBuf,
+}
+
+#[derive(Debug, Args)]
+pub struct ReportArg {
+    /// Experiment file, e.g. experiments/laptop.toml.
+    pub spec: PathBuf,
+    /// Moving-average window (iterations) for the curves and convergence.
+    #[arg(long, default_value_t = 10)]
+    pub window: usize,
+}
+
+pub fn run(args: ExperimentArgs) -> anyhow::Result<()> {
+    match args.command {
+        ExperimentCommand::Plan(a) => plan_cmd(&a.spec),
+        ExperimentCommand::Run(a) => run_cmd(&a.spec),
+        ExperimentCommand::Status(a) => status_cmd(&a.spec),
+        ExperimentCommand::Report(a) => report_cmd(&a.spec, a.window),
+    }
+}
+
+fn load(spec_path: &Path) -> anyhow::Result<(ExperimentSpec, Vec<Arm>)> {
+    let spec = ExperimentSpec::load(spec_path)?;
+    let base = Config::load(&spec.experiment.base_config)?;
+    let arms = plan(&spec, &base)?;
+    Ok((spec, arms))
+}
+
+/// Writes each arm's config file (unchanged files are left alone, so a running arm's config
+/// never changes under it).
+fn write_configs(spec: &ExperimentSpec, arms: &[Arm]) -> anyhow::Result<()> {
+    let dir = spec.dir();
+    std::fs::create_dir_all(dir.join("arms"))?;
+    for arm in arms {
+        let path = arm_config_path(&dir, &arm.name);
+        let text = format!(
+            "# Arm {} of experiment {} (written by `l3p experiment plan`).\n{}",
+            arm.name,
+            spec.experiment.name,
+            toml::to_string(&arm.config)?
+        );
+        if std::fs::read_to_string(&path).ok().as_deref() != Some(text.as_str()) {
+            std::fs::write(&path, text)?;
+        }
+    }
+    Ok(())
+}
+
+fn plan_cmd(spec_path: &Path) -> anyhow::Result<()> {
+    let (spec, arms) = load(spec_path)?;
+    write_configs(&spec, &arms)?;
+    let dir = spec.dir();
+    println!(
+        "# experiment {}: {} arms; configs in {}",
+        spec.experiment.name,
+        arms.len(),
+        dir.join("arms").display()
+    );
+    println!("# stage 1 — pretraining (the transfer arms start from these checkpoints)");
+    for arm in arms.iter().filter(|a| a.stage == Stage::Pretrain) {
+        println!(
+            "{}",
+            arm.command(&arm_config_path(&dir, &arm.name)).join(" ")
+        );
+    }
+    println!("# stage 2 — targets (run after stage 1; from-scratch arms may run alongside it)");
+    for arm in arms.iter().filter(|a| a.stage == Stage::Target) {
+        println!(
+            "{}",
+            arm.command(&arm_config_path(&dir, &arm.name)).join(" ")
+        );
+    }
+    Ok(())
+}
+
+fn status_cmd(spec_path: &Path) -> anyhow::Result<()> {
+    let (spec, arms) = load(spec_path)?;
+    println!(
+        "experiment {} ({})",
+        spec.experiment.name,
+        spec.dir().display()
+    );
+    let mut done = 0;
+    for arm in &arms {
+        let state = match arm_state(arm) {
+            ArmState::Done(d) => {
+                done += 1;
+                format!(
+                    "done, {} iterations in {:.1} min",
+                    d.iterations,
+                    d.wall_seconds / 60.0
+                )
+            }
+            ArmState::Running { pid, iteration } => {
+                format!(
+                    "running (pid {pid}), iteration {iteration}/{}",
+                    arm.iterations
+                )
+            }
+            ArmState::Partial { iteration, failure } => match failure {
+                Some(f) => format!(
+                    "failed at iteration {iteration}/{}: {}",
+                    arm.iterations,
+                    f.lines().next().unwrap_or("")
+                ),
+                None if iteration >= arm.iterations => format!(
+                    "trained ({iteration}/{}), not yet evaluated: `l3p experiment run` evaluates it",
+                    arm.iterations
+                ),
+                None => format!("interrupted at iteration {iteration}/{}", arm.iterations),
+            },
+            ArmState::Pending => "pending".into(),
+        };
+        println!("  {:<32} {state}", arm.name);
+    }
+    println!("{done}/{} arms done", arms.len());
+    Ok(())
+}
+
+/// A training process of one arm.
+struct Running {
+    arm: usize,
+    child: Child,
+    started: Instant,
+}
+
+fn run_cmd(spec_path: &Path) -> anyhow::Result<()> {
+    let (spec, arms) = load(spec_path)?;
+    write_configs(&spec, &arms)?;
+    let dir = spec.dir();
+    std::fs::create_dir_all(dir.join("logs"))?;
+    let exe = std::env::current_exe()?;
+    let parallel = spec.experiment.parallel;
+    // Arms not to start again in this invocation (finished, failed, or blocked by a failure).
+    let mut settled = vec![false; arms.len()];
+    let mut failed: Vec<String> = Vec::new();
+    let mut running: Vec<Running> = Vec::new();
+    loop {
+        // Reap finished processes.
+        let mut i = 0;
+        while i < running.len() {
+            if let Some(status) = running[i].child.try_wait()? {
+                let r = running.remove(i);
+                let arm = &arms[r.arm];
+                let _ = std::fs::remove_file(arm.data_dir().join("running.pid"));
+                settled[r.arm] = true;
+                let wall = add_wall_seconds(arm, r.started.elapsed().as_secs_f64())?;
+                match finish_arm(&spec, &arms, arm, status, wall) {
+                    Ok(()) => println!("arm {} done", arm.name),
+                    Err(e) => {
+                        let message = format!("{e:#}");
+                        eprintln!("arm {} failed: {message}", arm.name);
+                        std::fs::write(
+                            arm.data_dir().join("failed.json"),
+                            serde_json::to_string_pretty(&serde_json::json!({
+                                "arm": arm.name, "error": message,
+                                "log": dir.join("logs").join(format!("{}.log", arm.name)),
+                            }))?,
+                        )?;
+                        failed.push(arm.name.clone());
+                    }
+                }
+            } else {
+                i += 1;
+            }
+        }
+        // Start what can start.
+        let mut waiting = false;
+        for (k, arm) in arms.iter().enumerate() {
+            if settled[k] || running.iter().any(|r| r.arm == k) {
+                continue;
+            }
+            match arm_state(arm) {
+                ArmState::Done(_) => {
+                    settled[k] = true;
+                    continue;
+                }
+                ArmState::Running { pid, .. } => {
+                    // Another `experiment run` (or a scheduler) is training it.
+                    println!("arm {} is already running (pid {pid}); skipped", arm.name);
+                    settled[k] = true;
+                    continue;
+                }
+                _ => {}
+            }
+            if let Some(dep) = &arm.depends_on {
+                let dep_index = arms.iter().position(|a| &a.name == dep);
+                let dep_done = dep_index
+                    .map(|d| matches!(arm_state(&arms[d]), ArmState::Done(_)))
+                    .unwrap_or(false);
+                if !dep_done {
+                    if failed.contains(dep) || dep_index.map(|d| settled[d]).unwrap_or(true) {
+                        eprintln!(
+                            "arm {} skipped: its pretraining arm {dep} did not finish",
+                            arm.name
+                        );
+                        settled[k] = true;
+                        failed.push(arm.name.clone());
+                    } else {
+                        waiting = true;
+                    }
+                    continue;
+                }
+            }
+            if running.len() >= parallel {
+                waiting = true;
+                break;
+            }
+            running.push(start_arm(&exe, &dir, arm, k)?);
+        }
+        if running.is_empty() && !waiting {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(500));
+    }
+    let done = arms
+        .iter()
+        .filter(|a| matches!(arm_state(a), ArmState::Done(_)))
+        .count();
+    println!("{done}/{} arms done", arms.len());
+    if !failed.is_empty() {
+        anyhow::bail!(
+            "{} arms did not finish: {}\nhint: `l3p experiment status {}` shows where each stands; \
+             rerun `l3p experiment run` to retry them",
+            failed.len(),
+            failed.join(", "),
+            spec_path.display()
+        );
+    }
+    Ok(())
+}
+
+fn start_arm(exe: &Path, dir: &Path, arm: &Arm, index: usize) -> anyhow::Result<Running> {
+    std::fs::create_dir_all(arm.data_dir())?;
+    let _ = std::fs::remove_file(arm.data_dir().join("failed.json"));
+    let log_path = dir.join("logs").join(format!("{}.log", arm.name));
+    let log = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&log_path)?;
+    let config = arm_config_path(dir, &arm.name);
+    println!(
+        "arm {} starting ({} iterations; log {})",
+        arm.name,
+        arm.iterations,
+        log_path.display()
+    );
+    let child = Command::new(exe)
+        .arg("train")
+        .arg(&config)
+        .arg("--quiet")
+        .stdin(Stdio::null())
+        .stdout(log.try_clone()?)
+        .stderr(log)
+        .spawn()?;
+    std::fs::write(arm.data_dir().join("running.pid"), child.id().to_string())?;
+    Ok(Running {
+        arm: index,
+        child,
+        started: Instant::now(),
+    })
+}
+
+/// Adds one attempt's training seconds to the arm's `wall_seconds` file; returns the total over
+/// every attempt (an interrupted arm's earlier attempts count).
+fn add_wall_seconds(arm: &Arm, seconds: f64) -> anyhow::Result<f64> {
+    let path = arm.data_dir().join("wall_seconds");
+    let earlier: f64 = std::fs::read_to_string(&path)
+        .ok()
+        .and_then(|t| t.trim().parse().ok())
+        .unwrap_or(0.0);
+    let total = earlier + seconds;
+    std::fs::write(&path, format!("{total}\n"))?;
+    Ok(total)
+}
+
+/// After the training process exits: checks it reached every iteration, evaluates the final
+/// policy (and, for a transfer arm, the pretrained one zero-shot) and writes `done.json`.
+fn finish_arm(
+    spec: &ExperimentSpec,
+    arms: &[Arm],
+    arm: &Arm,
+    status: std::process::ExitStatus,
+    wall: f64,
+) -> anyhow::Result<()> {
+    let iteration = crate::experiment::last_iteration(&arm.run_dir());
+    if !status.success() {
+        anyhow::bail!("training exited with {status} at iteration {iteration}");
+    }
+    if iteration < arm.iterations {
+        anyhow::bail!(
+            "training stopped at iteration {iteration} of {} (interrupted); rerun to resume",
+            arm.iterations
+        );
+    }
+    let ckpt = crate::experiment::final_checkpoint(&arm.run_dir());
+    let mut evaluations = BTreeMap::new();
+    for robot in &arm.robots {
+        evaluations.insert(
+            robot.clone(),
+            evaluate(spec, &arm.config, &ckpt, robot, robot)?,
+        );
+    }
+    let zero_shot = match &arm.depends_on {
+        Some(dep) => {
+            let source = arms
+                .iter()
+                .find(|a| &a.name == dep)
+                .ok_or_else(|| anyhow::anyhow!("unknown pretraining arm {dep}"))?;
+            let source_robot = source
+                .robots
+                .first()
+                .ok_or_else(|| anyhow::anyhow!("pretraining arm {dep} has no robot"))?;
+            Some(evaluate(
+                spec,
+                &arm.config,
+                &crate::experiment::final_checkpoint(&source.run_dir()),
+                source_robot,
+                &arm.robots[0],
+            )?)
+        }
+        None => None,
+    };
+    let done = ArmDone {
+        arm: arm.name.clone(),
+        iterations: iteration,
+        wall_seconds: wall,
+        evaluations,
+        zero_shot,
+    };
+    std::fs::write(
+        arm.data_dir().join("done.json"),
+        serde_json::to_string_pretty(&done)?,
+    )?;
+    Ok(())
+}
+
+/// Plays `policy_robot`'s policy from `ckpt` on `robot`: the training command mix, then each
+/// `evaluation.forward` speed.
+fn evaluate(
+    spec: &ExperimentSpec,
+    config: &Config,
+    ckpt: &Path,
+    policy_robot: &str,
+    robot: &str,
+) -> anyhow::Result<Vec<crate::eval_cmd::EvalRow>> {
+    let checkpoint = l3p_policy::load_checkpoint(ckpt, &l3p_policy::cpu_device())?;
+    let (bytes, _) = l3p_policy::export_bytes(&checkpoint.model, policy_robot)?;
+    let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
+    let spec_robot = l3p_robots::catalog::RobotSpec::by_name(robot)?;
+    let ev = &spec.evaluation;
+    let mut speeds = vec![None];
+    speeds.extend(ev.forward.iter().map(|v| Some(*v)));
+    let mut rows = Vec::new();
+    for forward in speeds {
+        let mut env = config.env.clone();
+        if let Some(v) = forward {
+            crate::eval_cmd::constant_forward_command(&mut env, v);
+        }
+        rows.push(crate::eval_cmd::evaluate_row(
+            spec_robot,
+            &env,
+            &policy,
+            ev.envs,
+            ev.episodes,
+            ev.seed,
+            forward,
+            None,
+        )?);
+    }
+    Ok(rows)
+}
+
+/// The results of every finished arm.
+pub fn collect_results(arms: &[Arm], window: usize) -> Vec<ArmResult> {
+    let mut out = Vec::new();
+    for arm in arms {
+        let ArmState::Done(done) = arm_state(arm) else {
+            continue;
+        };
+        let Ok(records) = load_learner_records(&l3p_learner::daemon::metrics_path(&arm.run_dir()))
+        else {
+            continue;
+        };
+        let robot = arm.robots.join("+");
+        let mix = done
+            .evaluations
+            .get(&arm.robots[0])
+            .and_then(|rows| rows.iter().find(|r| r.forward.is_none()));
+        out.push(ArmResult {
+            robot,
+            method: arm.method,
+            seed: arm.seed,
+            row: ReportRow::from_records(&records, window),
+            wall_seconds: done.wall_seconds,
+            eval_lin_vel_error: mix
+                .map(|r| r.summary.lin_vel_error as f64)
+                .unwrap_or(f64::NAN),
+            eval_yaw_rate_error: mix
+                .map(|r| r.summary.yaw_rate_error as f64)
+                .unwrap_or(f64::NAN),
+            eval_return: mix
+                .map(|r| r.summary.episode_return as f64)
+                .unwrap_or(f64::NAN),
+            zero_shot_return: done.zero_shot.as_ref().and_then(|rows| {
+                rows.iter()
+                    .find(|r| r.forward.is_none())
+                    .map(|r| r.summary.episode_return as f64)
+            }),
+        });
+    }
+    out
+}
+
+fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
+    let (spec, arms) = load(spec_path)?;
+    let results = collect_results(&arms, window);
+    if results.is_empty() {
+        anyhow::bail!(
+            "no arm of {} has finished yet\nhint: `l3p experiment status {}`",
+            spec.experiment.name,
+            spec_path.display()
+        );
+    }
+    let out = spec.dir().join("report");
+    std::fs::create_dir_all(&out)?;
+    let table = markdown_table(&results);
+    let mut md = format!(
+        "# Experiment {} — {} of {} arms finished\n\nExperiment file: `{}`; base config: `{}`.\n\
+         Convergence (Cv.): the first iteration at which the smoothed curve ({window}-iteration \
+         moving average) has travelled 85% / 95% of the way from its start to its final value \
+         (means of the first and last 5% of iterations); final values are means over the last 5% of \
+         iterations. Tracking errors: the final policy under the training command mix ({} episodes). \
+         Zero-shot: the pretrained policy played on the target robot before any fine-tuning. \
+         The paper's numbers are from its rough-terrain curriculum with 5 seeds.\n\n{table}",
+        spec.experiment.name,
+        results.len(),
+        arms.len(),
+        spec_path.display(),
+        spec.experiment.base_config.display(),
+        spec.evaluation.episodes,
+    );
+    // Curves per target robot: every method's mean over seeds with its min-max band.
+    let mut robots: Vec<String> = results.iter().map(|r| r.robot.clone()).collect();
+    robots.sort();
+    robots.dedup();
+    for robot in &robots {
+        for (key, label) in [
+            ("episode_return", "episode reward"),
+            ("terrain_level", "terrain level"),
+        ] {
+            let mut lines = Vec::new();
+            for method in [
+                l3p_learner::Mode::Mlp,
+                l3p_learner::Mode::L3p,
+                l3p_learner::Mode::MlpTransfer,
+                l3p_learner::Mode::L3pTransfer,
+            ] {
+                let curves: Vec<Vec<(f64, f64)>> = arms
+                    .iter()
+                    .filter(|a| a.robots.join("+") == *robot && a.method == method)
+                    .filter(|a| matches!(arm_state(a), ArmState::Done(_)))
+                    .filter_map(|a| {
+                        load_learner_records(&l3p_learner::daemon::metrics_path(&a.run_dir())).ok()
+                    })
+                    .map(|records| smooth(&series(&records, key), window))
+                    .collect();
+                if !curves.is_empty() {
+                    lines.push((
+                        format!("{} ({} seeds)", method.as_str(), curves.len()),
+                        band(&curves),
+                    ));
+                }
+            }
+            if lines.is_empty() {
+                continue;
+            }
+            let file = out.join(format!("{robot}-{key}.svg"));
+            std::fs::write(
+                &file,
+                l3p_learner::report::svg_bands(&format!("{robot} — {label}"), label, &lines),
+            )?;
+            md.push_str(&format!("\n![{robot} {label}]({robot}-{key}.svg)\n"));
+        }
+    }
+    let file = out.join("README.md");
+    std::fs::write(&file, &md)?;
+    println!("{table}");
+    println!("wrote {} and the curves beside it", file.display());
+    Ok(())
+}

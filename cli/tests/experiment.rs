@@ -1,0 +1,227 @@
+//! `l3p experiment` end to end through real processes: a micro-experiment (A1 pretraining, two
+//! target robots × {l3p, l3p-transfer}, one seed) interrupted mid-arm with Ctrl-C, resumed, finished,
+//! reported; a finished experiment reruns without touching its arms.
+
+#![cfg(target_os = "linux")]
+
+use std::os::unix::process::CommandExt;
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+fn l3p(args: &[&str], cwd: &Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_l3p"))
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap()
+}
+
+fn text(out: &std::process::Output) -> String {
+    format!(
+        "{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    )
+}
+
+/// Learner iterations recorded in a run's metrics file, in file order.
+fn iterations(run_dir: &Path) -> Vec<u64> {
+    std::fs::read_to_string(run_dir.join("metrics.jsonl"))
+        .unwrap_or_default()
+        .lines()
+        .filter(|l| l.contains("\"source\":\"learner\""))
+        .filter_map(|l| serde_json::from_str::<serde_json::Value>(l).ok())
+        .filter_map(|v| v["iteration"].as_u64())
+        .collect()
+}
+
+const BASE: &str = r#"
+[run]
+name = "unused"
+[env]
+height_scan = false
+episode_length_s = 2.0
+[env.terrain]
+preset = "flat"
+[model]
+encoder_hidden = [32]
+core_hidden = [32]
+decoder_hidden = [32]
+critic_hidden = [32]
+[model.recovery]
+obs_hidden = [32]
+diffusion_steps = 10
+eval_samples = 32
+[learner]
+checkpoint_every = 1
+[rollout]
+steps_per_env = 8
+[[actors]]
+robot = "a1"
+envs = 4
+"#;
+
+const SPEC: &str = r#"
+[experiment]
+name = "micro"
+base_config = "base.toml"
+data_dir = "data"
+seeds = [1]
+parallel = 2
+[pretrain]
+robots = ["a1"]
+methods = ["l3p"]
+iterations = 12
+[targets]
+robots = ["go1", "spot"]
+methods = ["l3p", "l3p-transfer"]
+iterations = 3
+[evaluation]
+episodes = 2
+envs = 2
+forward = [0.5]
+"#;
+
+#[test]
+fn an_interrupted_experiment_resumes_finishes_and_reports() {
+    let dir = tempfile::tempdir().unwrap();
+    let cwd = dir.path();
+    std::fs::write(cwd.join("base.toml"), BASE).unwrap();
+    std::fs::write(cwd.join("micro.toml"), SPEC).unwrap();
+    let exp = cwd.join("data/micro");
+    let pretrain_run = exp.join("pretrain-l3p-s1/pretrain-l3p-s1");
+
+    // The plan: one pretraining arm, then 2 robots × 2 methods, as `l3p train` invocations.
+    let out = l3p(&["experiment", "plan", "micro.toml"], cwd);
+    let plan = text(&out);
+    assert!(out.status.success(), "{plan}");
+    assert!(plan.contains("5 arms"), "{plan}");
+    assert!(
+        plan.contains("l3p train data/micro/arms/pretrain-l3p-s1.toml --quiet"),
+        "{plan}"
+    );
+    assert!(
+        plan.contains("data/micro/arms/spot-l3p-transfer-s1.toml"),
+        "{plan}"
+    );
+
+    // Start the experiment in its own process group and interrupt it (Ctrl-C reaches the whole
+    // group) while the pretraining arm is part-way.
+    let mut run = Command::new(env!("CARGO_BIN_EXE_l3p"))
+        .args(["experiment", "run", "micro.toml"])
+        .current_dir(cwd)
+        .process_group(0)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(120);
+    while iterations(&pretrain_run).len() < 3 {
+        assert!(
+            Instant::now() < deadline,
+            "the pretraining arm never got going"
+        );
+        assert!(
+            run.try_wait().unwrap().is_none(),
+            "experiment run exited early"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let status = Command::new("kill")
+        .args(["-INT", "--", &format!("-{}", run.id())])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    run.wait().unwrap();
+    // Wait for the trainer (same group) to write its final checkpoint and exit.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while Path::new(&format!("/proc/{}", pid_of(&exp.join("pretrain-l3p-s1")))).exists() {
+        assert!(
+            Instant::now() < deadline,
+            "the trainer did not stop on Ctrl-C"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let reached = iterations(&pretrain_run).len();
+    assert!(
+        reached < 12,
+        "the arm finished before the interruption ({reached})"
+    );
+    assert!(!exp.join("pretrain-l3p-s1/done.json").exists());
+    let out = l3p(&["experiment", "status", "micro.toml"], cwd);
+    let status_text = text(&out);
+    assert!(
+        status_text.contains("interrupted at iteration"),
+        "{status_text}"
+    );
+    assert!(status_text.contains("0/5 arms done"), "{status_text}");
+
+    // Rerun: the pretraining arm resumes from its checkpoint (iterations continue, none repeats),
+    // then the targets train, the transfer arms from the pretrained core.
+    let out = l3p(&["experiment", "run", "micro.toml"], cwd);
+    let log = text(&out);
+    assert!(out.status.success(), "{log}");
+    assert!(log.contains("5/5 arms done"), "{log}");
+    let its = iterations(&pretrain_run);
+    assert_eq!(
+        its,
+        (1..=12).collect::<Vec<u64>>(),
+        "resumed, not restarted"
+    );
+    let done: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(exp.join("spot-l3p-transfer-s1/done.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(done["iterations"], 3);
+    assert!(done["wall_seconds"].as_f64().unwrap() > 0.0);
+    // The final policy under the command mix and at 0.5 m/s; zero-shot: A1's policy on Spot.
+    assert_eq!(done["evaluations"]["spot"].as_array().unwrap().len(), 2);
+    assert_eq!(done["zero_shot"].as_array().unwrap().len(), 2);
+    let arm_config = std::fs::read_to_string(exp.join("arms/spot-l3p-transfer-s1.toml")).unwrap();
+    assert!(
+        arm_config.contains("mode = \"l3p-transfer\""),
+        "{arm_config}"
+    );
+    assert!(
+        arm_config.contains("pretrain-l3p-s1/pretrain-l3p-s1/checkpoints/latest.ckpt"),
+        "{arm_config}"
+    );
+
+    // A finished experiment reruns without touching its arms.
+    let stamp = |arm: &str| {
+        std::fs::metadata(exp.join(arm).join("done.json"))
+            .unwrap()
+            .modified()
+            .unwrap()
+    };
+    let before = stamp("go1-l3p-s1");
+    let out = l3p(&["experiment", "run", "micro.toml"], cwd);
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(!text(&out).contains("starting"), "{}", text(&out));
+    assert_eq!(stamp("go1-l3p-s1"), before);
+
+    // The report: one row per robot and method, curves per robot.
+    let out = l3p(&["experiment", "report", "micro.toml"], cwd);
+    let report = text(&out);
+    assert!(out.status.success(), "{report}");
+    for row in [
+        "| a1 | l3p | 1 |",
+        "| go1 | l3p-transfer | 1 |",
+        "| spot | l3p | 1 |",
+    ] {
+        assert!(report.contains(row), "{row}: {report}");
+    }
+    assert!(exp.join("report/README.md").exists());
+    let svg = std::fs::read_to_string(exp.join("report/go1-episode_return.svg")).unwrap();
+    assert!(svg.contains("l3p-transfer (1 seeds)"), "{svg}");
+}
+
+/// The pid an arm's `running.pid` names (0 when gone).
+fn pid_of(arm_dir: &Path) -> u32 {
+    std::fs::read_to_string(arm_dir.join("running.pid"))
+        .ok()
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or(0)
+}
