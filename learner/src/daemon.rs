@@ -358,6 +358,7 @@ fn update_metrics(record: &mut MetricsRecord, m: &UpdateMetrics) {
         ("rec_obs_loss", m.rec_obs_loss as f64),
         ("rec_act_loss", m.rec_act_loss as f64),
         ("symmetry_loss", m.symmetry_loss as f64),
+        ("smoothness_loss", m.smoothness_loss as f64),
         ("recon_mse", m.recon_mse as f64),
         ("recon_baseline_mse", m.recon_baseline_mse as f64),
         ("grad_norm", m.grad_norm as f64),

@@ -13,7 +13,8 @@
 //!    adapters and the shared core, computes the KL to the behaviour policy and adapts the learning
 //!    rate *before* the step, the clipped surrogate, the clipped value loss, the entropy bonus and
 //!    `λ (L_rec_obs + L_rec_act)`, with `symmetry_coef` > 0 the mirror loss on the same minibatch
-//!    mirrored left-right ([`Mirror`]), back-propagates, clips the global gradient norm and steps Adam.
+//!    mirrored left-right ([`Mirror`]), with `smoothness_coef` > 0 the temporal smoothness loss on
+//!    each sample's next observation, back-propagates, clips the global gradient norm and steps Adam.
 
 use std::time::Instant;
 
@@ -120,6 +121,11 @@ pub struct PpoConfig {
     /// policy's mean on a left-right mirrored observation should be the mirrored mean. 0 = off;
     /// every robot then needs a [`Mirror`] ([`Ppo::set_mirror`]).
     pub symmetry_coef: f32,
+    /// Weight of the temporal smoothness loss `mean((μ(o_t) − μ(o_{t+1}))²)` over consecutive
+    /// observations of one episode (CAPS, Mysore et al. 2021): the policy's mean may not jump
+    /// between neighbouring states, which penalises the joint-target chatter differentiably
+    /// instead of only through an action-rate reward. 0 = off.
+    pub smoothness_coef: f32,
 }
 
 impl Default for PpoConfig {
@@ -144,6 +150,7 @@ impl Default for PpoConfig {
             adam_epsilon: 1e-8,
             seed: 1,
             symmetry_coef: 0.0,
+            smoothness_coef: 0.0,
         }
     }
 }
@@ -177,6 +184,7 @@ impl PpoConfig {
             ("value_loss_coef", self.value_loss_coef),
             ("entropy_coef", self.entropy_coef),
             ("symmetry_coef", self.symmetry_coef),
+            ("smoothness_coef", self.smoothness_coef),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return bad(format!("ppo.{key} = {v}: expected a finite number >= 0"));
@@ -235,6 +243,8 @@ pub struct UpdateMetrics {
     pub rec_act_loss: f32,
     /// Mirror-symmetry loss (0 when `symmetry_coef` is 0).
     pub symmetry_loss: f32,
+    /// Temporal smoothness loss (0 when `smoothness_coef` is 0).
+    pub smoothness_loss: f32,
     pub total_loss: f32,
     /// Global gradient norm before clipping (mean over minibatches).
     pub grad_norm: f32,
@@ -606,15 +616,26 @@ impl Ppo {
                 let acc_before = acc.clone();
                 let mut obs_t = Vec::with_capacity(self.model.robots.len());
                 obs_t.resize_with(self.model.robots.len(), || None);
+                let mut next_t: Vec<Option<Tensor<2>>> = Vec::with_capacity(obs_t.len());
+                next_t.resize_with(obs_t.len(), || None);
+                let mut next_valid = vec![0usize; obs_t.len()];
                 let mut per_robot = Vec::with_capacity(prepared.len());
                 for (p, r) in prepared.iter().zip(&batch.robots) {
                     let mb = p.n / cfg.num_mini_batches;
                     let idx = &p.perm[k * mb..(k + 1) * mb];
                     let g = Gathered::new(r, p, idx);
                     obs_t[p.robot] = Some(self.tensor2(g.obs.clone(), mb, p.obs_dim));
+                    if cfg.smoothness_coef > 0.0 {
+                        let (next, valid) = next_observations(r, idx);
+                        next_t[p.robot] = Some(self.tensor2(next, mb, p.obs_dim));
+                        next_valid[p.robot] = valid;
+                    }
                     per_robot.push((mb, g));
                 }
                 let outs = self.model.net.actors(obs_t.clone());
+                // Every sample's next observation in its episode, for the smoothness loss.
+                let next_outs =
+                    (cfg.smoothness_coef > 0.0).then(|| self.model.net.actors(next_t.clone()));
                 // The same minibatch mirrored left-right, for the symmetry loss.
                 let mirrored_outs = (cfg.symmetry_coef > 0.0).then(|| {
                     let mirrored = obs_t
@@ -702,6 +723,24 @@ impl Ppo {
                         acc.symmetry += w * scalar(l.clone().detach())?;
                         loss = loss.add(l.mul_scalar(cfg.symmetry_coef));
                     }
+                    if let Some(next_outs) = &next_outs
+                        && next_valid[p.robot] > 0
+                    {
+                        let out_next = next_outs[p.robot]
+                            .as_ref()
+                            .ok_or_else(|| LearnerError::Batch("missing next output".into()))?;
+                        // Rows without a next state in the episode hold their own observation,
+                        // so they add zero; the mean is over the valid rows.
+                        let l = out_next
+                            .mean
+                            .clone()
+                            .sub(out.mean.clone())
+                            .square()
+                            .sum()
+                            .div_scalar((next_valid[p.robot] * p.act_dim) as f32);
+                        acc.smoothness += w * scalar(l.clone().detach())?;
+                        loss = loss.add(l.mul_scalar(cfg.smoothness_coef));
+                    }
                     acc.surrogate += w * scalar(surrogate.detach())?;
                     acc.value += w * scalar(value_loss.detach())?;
                     acc.entropy += w * scalar(entropy.detach())?;
@@ -782,6 +821,7 @@ impl Ppo {
             rec_obs_loss: acc.rec_obs / steps,
             rec_act_loss: acc.rec_act / steps,
             symmetry_loss: acc.symmetry / steps,
+            smoothness_loss: acc.smoothness / steps,
             total_loss: acc.total / steps,
             grad_norm: acc.grad_norm / steps,
             skipped_steps: acc.skipped,
@@ -851,6 +891,7 @@ struct Acc {
     rec_obs: f32,
     rec_act: f32,
     symmetry: f32,
+    smoothness: f32,
     total: f32,
     grad_norm: f32,
     steps: usize,
@@ -892,6 +933,31 @@ impl Gathered {
             old_v: pick(&p.values),
         }
     }
+}
+
+/// The observation after each sample `idx[k]` in its episode (step-major rollout: sample
+/// `t · envs + e`), and how many samples have one: a sample whose episode ended there (terminated or
+/// truncated) gets its own observation back, as does none. The last step's successor is the
+/// rollout's `last_observations`.
+fn next_observations(r: &crate::storage::RobotRollout, idx: &[usize]) -> (Vec<f32>, usize) {
+    let d = r.obs_dim;
+    let mut out = Vec::with_capacity(idx.len() * d);
+    let mut valid = 0;
+    for &j in idx {
+        let (t, e) = (j / r.envs, j % r.envs);
+        let next = if r.terminated[j] || r.truncated[j] {
+            &r.observations[j * d..(j + 1) * d]
+        } else {
+            valid += 1;
+            if t + 1 < r.steps {
+                &r.observations[(j + r.envs) * d..(j + r.envs + 1) * d]
+            } else {
+                &r.last_observations[e * d..(e + 1) * d]
+            }
+        };
+        out.extend_from_slice(next);
+    }
+    (out, valid)
 }
 
 /// rsl_rl's KL estimate between the behaviour policy `N(old_mu, old_sigma)` and the current

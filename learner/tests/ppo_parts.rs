@@ -512,6 +512,54 @@ fn the_symmetry_loss_makes_the_policy_mirror_symmetric() {
     );
 }
 
+/// RMS change of the policy's mean action between consecutive steps of the same episode.
+fn mean_action_roughness(batch: &RolloutBatch) -> f32 {
+    let r = &batch.robots[0];
+    let (mut sum, mut n) = (0.0, 0);
+    for t in 0..r.steps - 1 {
+        for e in 0..r.envs {
+            let j = t * r.envs + e;
+            if r.truncated[j] || r.terminated[j] {
+                continue;
+            }
+            for k in 0..ACT {
+                let d = r.action_means[(j + r.envs) * ACT + k] - r.action_means[j * ACT + k];
+                sum += d * d;
+                n += 1;
+            }
+        }
+    }
+    (sum / n as f32).sqrt()
+}
+
+#[test]
+fn the_smoothness_loss_makes_the_mean_action_change_less_between_steps() {
+    let start = mlp_ppo();
+    let train = |coef: f32| {
+        let mut cfg = start.config().clone();
+        cfg.smoothness_coef = coef;
+        let mut ppo = Ppo::new(cfg, start.model().clone(), train_device()).unwrap();
+        let mut env = PointMass::new(32, 7);
+        let mut rng = StdRng::seed_from_u64(11);
+        let mut last = UpdateMetrics::default();
+        for _ in 0..15 {
+            let batch = collect(ppo.model(), &mut env, 8, &mut rng);
+            last = ppo.update(&batch).unwrap();
+        }
+        let batch = collect(ppo.model(), &mut PointMass::new(64, 3), 16, &mut rng);
+        (mean_action_roughness(&batch), last.smoothness_loss)
+    };
+    let (without, loss_off) = train(0.0);
+    // Over 8 runs the ratio with/without was 0.26–0.30 at coefficient 3.
+    let (with, loss_on) = train(3.0);
+    assert_eq!(loss_off, 0.0);
+    assert!(loss_on > 0.0 && loss_on.is_finite());
+    assert!(
+        with < 0.5 * without,
+        "mean-action change per step: without the loss {without}, with it {with}"
+    );
+}
+
 #[test]
 fn a_symmetry_loss_without_a_valid_mirror_is_a_clear_error() {
     let base = mlp_ppo();
