@@ -36,6 +36,7 @@ pub mod bench;
 pub mod catalog;
 pub mod config;
 pub mod gait;
+pub mod infer;
 pub mod mirror;
 pub mod model;
 pub mod sim;
