@@ -37,7 +37,8 @@ pub struct TrainArgs {
     pub quiet: bool,
     /// Time to walk: every --eval-every iterations evaluate the latest checkpoint against the walk
     /// criterion (forward 0.5 and 1.0 m/s, joint damping at the top of its randomisation range) and
-    /// stop as soon as it holds; prints and writes `<run_dir>/walk.json` (wall-clock, samples,
+    /// stop as soon as it holds (every check is appended to `<run_dir>/walk_checks.jsonl`); prints
+    /// and writes `<run_dir>/walk.json` (wall-clock, samples,
     /// iterations, the evaluation).
     #[arg(long)]
     pub until_walks: bool,
@@ -217,14 +218,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             {
                 match t.await {
                     Ok(Ok(check)) => {
-                        let fails: usize = check.rows.iter().map(|r| r.walk_failures.len()).sum();
-                        info!(iteration = check.iteration, failing_bounds = fails, "walk check");
-                        for r in &check.rows {
-                            for f in &r.walk_failures {
-                                info!("  vx {:.1}: {f}", r.forward.unwrap_or(f32::NAN));
-                            }
-                        }
-                        if fails == 0 {
+                        if record_walk_check(&check, started.elapsed().as_secs_f64(), &run_dir) {
                             walked = Some((check, started.elapsed().as_secs_f64()));
                             cancel.cancel();
                         }
@@ -277,8 +271,19 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         }
         bar.finish();
         let summary = learner.await??;
+        // A check still running when training stopped is the last word on the last policies.
         if let Some(t) = walk_task.take() {
-            t.abort();
+            match t.await {
+                Ok(Ok(check)) => {
+                    if record_walk_check(&check, started.elapsed().as_secs_f64(), &run_dir)
+                        && walked.is_none()
+                    {
+                        walked = Some((check, started.elapsed().as_secs_f64()));
+                    }
+                }
+                Ok(Err(e)) => warn!("walk check failed: {e:#}"),
+                Err(e) => warn!("walk check panicked: {e}"),
+            }
         }
         if args.until_walks {
             report_walk(&run_dir, walked.as_ref(), samples_per_iteration)?;
@@ -299,6 +304,31 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         );
         Ok(())
     })
+}
+
+/// Logs a walk check (its failing bounds) and appends it to `<run_dir>/walk_checks.jsonl`, so every
+/// bound has a curve; true when the criterion holds.
+fn record_walk_check(check: &WalkCheck, wall_seconds: f64, run_dir: &std::path::Path) -> bool {
+    let fails: usize = check.rows.iter().map(|r| r.walk_failures.len()).sum();
+    info!(
+        iteration = check.iteration,
+        failing_bounds = fails,
+        "walk check"
+    );
+    for r in &check.rows {
+        for f in &r.walk_failures {
+            info!("  vx {:.1}: {f}", r.forward.unwrap_or(f32::NAN));
+        }
+    }
+    let line = serde_json::json!({
+        "iteration": check.iteration,
+        "wall_seconds": wall_seconds,
+        "rows": check.rows,
+    });
+    if let Err(e) = append_line(&run_dir.join("walk_checks.jsonl"), &line.to_string()) {
+        warn!("cannot record the walk check: {e}");
+    }
+    fails == 0
 }
 
 /// Prints and writes `<run_dir>/walk.json` for `--until-walks`.
@@ -334,4 +364,14 @@ fn report_walk(
         serde_json::to_string_pretty(&json)?,
     )?;
     Ok(())
+}
+
+/// Appends `line` and a newline to `path`.
+fn append_line(path: &std::path::Path, line: &str) -> std::io::Result<()> {
+    use std::io::Write;
+    let mut f = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)?;
+    writeln!(f, "{line}")
 }

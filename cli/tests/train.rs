@@ -208,3 +208,81 @@ fn killed_train_leaves_no_orphan_actor() {
         std::thread::sleep(Duration::from_millis(100));
     }
 }
+
+/// `--until-walks` evaluates the latest checkpoint every `--eval-every` iterations and records every
+/// check (a policy this young does not walk, so the run goes to its last iteration).
+#[test]
+fn until_walks_records_every_walk_check() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("run.toml");
+    std::fs::write(
+        &config,
+        r#"
+[run]
+name = "walks"
+[env]
+height_scan = false
+episode_length_s = 2.0
+[env.terrain]
+preset = "flat"
+[model]
+encoder_hidden = [32]
+core_hidden = [32]
+critic_hidden = [32]
+[model.recovery]
+obs_hidden = [32]
+diffusion_steps = 10
+eval_samples = 32
+[learner]
+max_iterations = 4
+checkpoint_every = 1
+[rollout]
+steps_per_env = 8
+[[actors]]
+robot = "a1"
+envs = 4
+"#,
+    )
+    .unwrap();
+    let data = dir.path().join("data");
+    let out = l3p(&[
+        "train",
+        config.to_str().unwrap(),
+        "--data-dir",
+        data.to_str().unwrap(),
+        "--quiet",
+        "--until-walks",
+        "--eval-every",
+        "2",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("did not hold"), "{stdout}");
+    let walk: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data.join("walks/walk.json")).unwrap())
+            .unwrap();
+    assert_eq!(walk["walks"], false);
+    let checks = std::fs::read_to_string(data.join("walks/walk_checks.jsonl")).unwrap();
+    let checks: Vec<serde_json::Value> = checks
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(!checks.is_empty(), "no walk check recorded");
+    for c in &checks {
+        let rows = c["rows"].as_array().unwrap();
+        assert_eq!(rows.len(), 2, "{c}");
+        assert_eq!(rows[0]["forward"], 0.5);
+        assert!(
+            !rows[0]["walk_failures"].as_array().unwrap().is_empty(),
+            "{c}"
+        );
+        assert!(
+            rows[1]["gait"]["target_change_rms"].as_f64().is_some(),
+            "{c}"
+        );
+    }
+}

@@ -4,7 +4,8 @@
 //! No simulation.
 //!
 //! The vendor files are read where they lie (never copied): `$L3P_SHARED_DIR/urdf`, else
-//! `../shared/urdf` beside the workspace. Unlike `tests/urdf.rs`, a missing corpus or file fails.
+//! `../shared/urdf` beside the workspace; without a corpus these tests print `skipped` and pass (as
+//! `tests/urdf.rs`), a file missing from it fails.
 
 use std::path::PathBuf;
 
@@ -15,21 +16,25 @@ use l3p_robots::urdf::{UrdfError, load_urdf_file, load_urdf_str};
 // ---------------------------------------------------------------------------------------------
 // Vendor files
 
-fn shared_urdf_dir() -> PathBuf {
+/// The vendor corpus: `$L3P_SHARED_DIR/urdf`, else `../shared/urdf` beside the workspace; `None`
+/// (the vendor tests print `skipped` and pass, as README says) when neither exists. A file missing
+/// from a corpus that exists still fails.
+fn shared_urdf_dir() -> Option<PathBuf> {
     let candidates: Vec<PathBuf> = match std::env::var_os("L3P_SHARED_DIR") {
         Some(d) => vec![PathBuf::from(d).join("urdf")],
         None => vec![PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/urdf")],
     };
-    candidates
+    let found = candidates
         .iter()
         .find(|d| d.is_dir())
-        .map(|d| d.canonicalize().unwrap_or_else(|_| d.clone()))
-        .unwrap_or_else(|| {
-            panic!(
-                "vendor URDF corpus not found at {}\nhint: set L3P_SHARED_DIR to the folder holding urdf/",
-                candidates[0].display()
-            )
-        })
+        .map(|d| d.canonicalize().unwrap_or_else(|_| d.clone()));
+    if found.is_none() {
+        eprintln!(
+            "skipped: vendor URDF corpus not found at {}",
+            candidates[0].display()
+        );
+    }
+    found
 }
 
 /// Vendor file, catalog robot it corresponds to, and how its names relate to the catalog's.
@@ -56,7 +61,9 @@ fn infer_file(path: &std::path::Path) -> InferredLegs {
 
 #[test]
 fn every_vendor_urdf_is_inferred_in_the_catalog_order() {
-    let dir = shared_urdf_dir();
+    let Some(dir) = shared_urdf_dir() else {
+        return;
+    };
     for (file, robot) in VENDOR {
         let legs = infer_file(&dir.join(file));
         println!("{file}\n{legs}");
@@ -123,7 +130,9 @@ fn every_vendor_urdf_is_inferred_in_the_catalog_order() {
 #[test]
 fn every_urdf_in_the_corpus_is_a_quadruped() {
     // Files added to the corpus later are inferred too (they need not be in `VENDOR`).
-    let dir = shared_urdf_dir();
+    let Some(dir) = shared_urdf_dir() else {
+        return;
+    };
     let mut n = 0;
     for entry in std::fs::read_dir(&dir).unwrap() {
         let sub = entry.unwrap().path();
