@@ -153,6 +153,14 @@ fn check(robot: &str, seconds: f32, training_gains: bool) -> anyhow::Result<()> 
     for w in &model.warnings {
         println!("note: {w}");
     }
+    // The leg structure as `l3p robots add` will infer it: from geometry, whatever the names.
+    match l3p_robots::infer::infer_quadruped(&model) {
+        Ok(legs) => print!(
+            "inferred legs (canonical order FL, FR, RL, RR):\n{}",
+            legs.summary()
+        ),
+        Err(e) => println!("not a quadruped l3p can infer: {e}"),
+    }
     let Some((spec, binding)) = matched else {
         println!(
             "stand test skipped: the joints do not match a built-in robot's {NUM_JOINTS} leg joints (names)"
