@@ -121,11 +121,16 @@ pub struct PpoConfig {
     /// policy's mean on a left-right mirrored observation should be the mirrored mean. 0 = off;
     /// every robot then needs a [`Mirror`] ([`Ppo::set_mirror`]).
     pub symmetry_coef: f32,
-    /// Weight of the temporal smoothness loss `mean((μ(o_t) − μ(o_{t+1}))²)` over consecutive
+    /// Weight of the temporal smoothness loss `mean((μ(o_t) − μ(o_{t+1}))²)` (or the second
+    /// difference, `smoothness_order`) over consecutive
     /// observations of one episode (CAPS, Mysore et al. 2021): the policy's mean may not jump
     /// between neighbouring states, which penalises the joint-target chatter differentiably
     /// instead of only through an action-rate reward. 0 = off.
     pub smoothness_coef: f32,
+    /// Which difference the smoothness loss penalises: 1 = `μ(o_{t+1}) − μ(o_t)` (every change,
+    /// the fast but smooth motion of a quick gait included), 2 = `μ(o_{t+1}) − 2μ(o_t) + μ(o_{t−1})`
+    /// (only changes of the change: step-to-step jitter, not a smooth gait at any speed).
+    pub smoothness_order: u8,
 }
 
 impl Default for PpoConfig {
@@ -151,6 +156,7 @@ impl Default for PpoConfig {
             seed: 1,
             symmetry_coef: 0.0,
             smoothness_coef: 0.0,
+            smoothness_order: 1,
         }
     }
 }
@@ -194,6 +200,12 @@ impl PpoConfig {
             if !(0.0..=1.0).contains(&v) {
                 return bad(format!("ppo.{key} = {v}: expected 0 <= {key} <= 1"));
             }
+        }
+        if !matches!(self.smoothness_order, 1 | 2) {
+            return bad(format!(
+                "ppo.smoothness_order = {}: expected 1 (first difference) or 2 (second)",
+                self.smoothness_order
+            ));
         }
         if self.lr_min > self.lr_max {
             return bad(format!(
@@ -618,6 +630,8 @@ impl Ppo {
                 obs_t.resize_with(self.model.robots.len(), || None);
                 let mut next_t: Vec<Option<Tensor<2>>> = Vec::with_capacity(obs_t.len());
                 next_t.resize_with(obs_t.len(), || None);
+                let mut prev_t: Vec<Option<Tensor<2>>> = Vec::with_capacity(obs_t.len());
+                prev_t.resize_with(obs_t.len(), || None);
                 let mut next_valid = vec![0usize; obs_t.len()];
                 let mut per_robot = Vec::with_capacity(prepared.len());
                 for (p, r) in prepared.iter().zip(&batch.robots) {
@@ -626,9 +640,10 @@ impl Ppo {
                     let g = Gathered::new(r, p, idx);
                     obs_t[p.robot] = Some(self.tensor2(g.obs.clone(), mb, p.obs_dim));
                     if cfg.smoothness_coef > 0.0 {
-                        let (next, valid) = next_observations(r, idx);
-                        next_t[p.robot] = Some(self.tensor2(next, mb, p.obs_dim));
-                        next_valid[p.robot] = valid;
+                        let n = neighbour_observations(r, idx, cfg.smoothness_order);
+                        next_t[p.robot] = Some(self.tensor2(n.next, mb, p.obs_dim));
+                        prev_t[p.robot] = n.prev.map(|v| self.tensor2(v, mb, p.obs_dim));
+                        next_valid[p.robot] = n.valid;
                     }
                     per_robot.push((mb, g));
                 }
@@ -636,6 +651,8 @@ impl Ppo {
                 // Every sample's next observation in its episode, for the smoothness loss.
                 let next_outs =
                     (cfg.smoothness_coef > 0.0).then(|| self.model.net.actors(next_t.clone()));
+                let prev_outs = (cfg.smoothness_coef > 0.0 && cfg.smoothness_order == 2)
+                    .then(|| self.model.net.actors(prev_t.clone()));
                 // The same minibatch mirrored left-right, for the symmetry loss.
                 let mirrored_outs = (cfg.symmetry_coef > 0.0).then(|| {
                     let mirrored = obs_t
@@ -729,12 +746,16 @@ impl Ppo {
                         let out_next = next_outs[p.robot]
                             .as_ref()
                             .ok_or_else(|| LearnerError::Batch("missing next output".into()))?;
-                        // Rows without a next state in the episode hold their own observation,
-                        // so they add zero; the mean is over the valid rows.
-                        let l = out_next
-                            .mean
-                            .clone()
-                            .sub(out.mean.clone())
+                        // Rows without neighbours in the episode hold their own observation, so
+                        // they add zero; the mean is over the valid rows.
+                        let mut diff = out_next.mean.clone().sub(out.mean.clone());
+                        if let Some(prev_outs) = &prev_outs {
+                            let out_prev = prev_outs[p.robot].as_ref().ok_or_else(|| {
+                                LearnerError::Batch("missing previous output".into())
+                            })?;
+                            diff = diff.sub(out.mean.clone().sub(out_prev.mean.clone()));
+                        }
+                        let l = diff
                             .square()
                             .sum()
                             .div_scalar((next_valid[p.robot] * p.act_dim) as f32);
@@ -935,29 +956,52 @@ impl Gathered {
     }
 }
 
-/// The observation after each sample `idx[k]` in its episode (step-major rollout: sample
-/// `t · envs + e`), and how many samples have one: a sample whose episode ended there (terminated or
-/// truncated) gets its own observation back, as does none. The last step's successor is the
-/// rollout's `last_observations`.
-fn next_observations(r: &crate::storage::RobotRollout, idx: &[usize]) -> (Vec<f32>, usize) {
+/// Each sample's neighbouring observations in its episode, for the smoothness loss.
+struct Neighbours {
+    next: Vec<f32>,
+    /// Order 2 only.
+    prev: Option<Vec<f32>>,
+    /// Samples that have every neighbour the order needs.
+    valid: usize,
+}
+
+/// The observations after (and for order 2 before) each sample `idx[k]` in its episode
+/// (step-major rollout: sample `t · envs + e`; the last step's successor is the rollout's
+/// `last_observations`). A sample without them — its episode ended there (terminated or
+/// truncated), or for order 2 began there or at the rollout's start — gets its own observation
+/// back in every slot, so its difference is zero.
+fn neighbour_observations(
+    r: &crate::storage::RobotRollout,
+    idx: &[usize],
+    order: u8,
+) -> Neighbours {
     let d = r.obs_dim;
-    let mut out = Vec::with_capacity(idx.len() * d);
+    let own = |j: usize| &r.observations[j * d..(j + 1) * d];
+    let mut next = Vec::with_capacity(idx.len() * d);
+    let mut prev = (order == 2).then(|| Vec::with_capacity(idx.len() * d));
     let mut valid = 0;
     for &j in idx {
         let (t, e) = (j / r.envs, j % r.envs);
-        let next = if r.terminated[j] || r.truncated[j] {
-            &r.observations[j * d..(j + 1) * d]
-        } else {
+        let has_next = !(r.terminated[j] || r.truncated[j]);
+        let has_prev = t > 0 && !(r.terminated[j - r.envs] || r.truncated[j - r.envs]);
+        if has_next && (order == 1 || has_prev) {
             valid += 1;
-            if t + 1 < r.steps {
-                &r.observations[(j + r.envs) * d..(j + r.envs + 1) * d]
+            next.extend_from_slice(if t + 1 < r.steps {
+                own(j + r.envs)
             } else {
                 &r.last_observations[e * d..(e + 1) * d]
+            });
+            if let Some(p) = prev.as_mut() {
+                p.extend_from_slice(own(j - r.envs));
             }
-        };
-        out.extend_from_slice(next);
+        } else {
+            next.extend_from_slice(own(j));
+            if let Some(p) = prev.as_mut() {
+                p.extend_from_slice(own(j));
+            }
+        }
     }
-    (out, valid)
+    Neighbours { next, prev, valid }
 }
 
 /// rsl_rl's KL estimate between the behaviour policy `N(old_mu, old_sigma)` and the current
