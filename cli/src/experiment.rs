@@ -372,23 +372,30 @@ pub enum ArmState {
     Pending,
 }
 
-/// Reads the state of `arm` from `<arm data dir>`.
+/// The arm's `done.json`, when it has finished.
+pub fn read_done(arm: &Arm) -> Option<ArmDone> {
+    let text = std::fs::read_to_string(arm.data_dir().join("done.json")).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
+/// The live process its `running.pid` names, if any.
+pub fn live_pid(arm: &Arm) -> Option<u32> {
+    std::fs::read_to_string(arm.data_dir().join("running.pid"))
+        .ok()
+        .and_then(|s| s.trim().parse::<u32>().ok())
+        .filter(|pid| process_alive(*pid))
+}
+
+/// Reads the state of `arm` from `<arm data dir>` (the iteration from its metrics file).
 pub fn arm_state(arm: &Arm) -> ArmState {
-    let dir = arm.data_dir();
-    if let Ok(text) = std::fs::read_to_string(dir.join("done.json"))
-        && let Ok(done) = serde_json::from_str::<ArmDone>(&text)
-    {
+    if let Some(done) = read_done(arm) {
         return ArmState::Done(Box::new(done));
     }
     let iteration = last_iteration(&arm.run_dir());
-    if let Some(pid) = std::fs::read_to_string(dir.join("running.pid"))
-        .ok()
-        .and_then(|s| s.trim().parse::<u32>().ok())
-        && process_alive(pid)
-    {
+    if let Some(pid) = live_pid(arm) {
         return ArmState::Running { pid, iteration };
     }
-    let failure = std::fs::read_to_string(dir.join("failed.json")).ok();
+    let failure = std::fs::read_to_string(arm.data_dir().join("failed.json")).ok();
     if iteration == 0 && failure.is_none() {
         ArmState::Pending
     } else {
@@ -443,161 +450,36 @@ pub fn mean_std(values: &[f64]) -> Option<(f64, f64)> {
 /// The paper's Table "Accuracy and Performance Comparison" (5 seeds, rough-terrain curriculum,
 /// IsaacLab): `(robot, method, level 85%, level 95%, final level, reward 85%, reward 95%, final
 /// reward)`; convergence in iterations.
+#[rustfmt::skip]
 pub const PAPER_TABLE: &[(&str, &str, f64, f64, f64, f64, f64, f64)] = &[
     ("a1", "mlp", 796.0, 1156.0, 5.88, 851.0, 1328.0, 22.04),
     ("a1", "l3p", 760.0, 978.0, 5.77, 740.0, 1202.0, 23.16),
-    (
-        "a1",
-        "mlp-transfer",
-        648.0,
-        933.0,
-        5.98,
-        545.0,
-        1337.0,
-        24.56,
-    ),
-    (
-        "a1",
-        "l3p-transfer",
-        394.0,
-        462.0,
-        5.95,
-        179.0,
-        226.0,
-        24.36,
-    ),
+    ("a1", "mlp-transfer", 648.0, 933.0, 5.98, 545.0, 1337.0, 24.56),
+    ("a1", "l3p-transfer", 394.0, 462.0, 5.95, 179.0, 226.0, 24.36),
     ("go1", "mlp", 691.0, 975.0, 5.95, 463.0, 1238.0, 23.42),
     ("go1", "l3p", 830.0, 1078.0, 5.78, 664.0, 1190.0, 23.14),
-    (
-        "go1",
-        "mlp-transfer",
-        591.0,
-        930.0,
-        5.85,
-        296.0,
-        1086.0,
-        23.45,
-    ),
-    (
-        "go1",
-        "l3p-transfer",
-        428.0,
-        512.0,
-        6.02,
-        181.0,
-        234.0,
-        24.45,
-    ),
+    ("go1", "mlp-transfer", 591.0, 930.0, 5.85, 296.0, 1086.0, 23.45),
+    ("go1", "l3p-transfer", 428.0, 512.0, 6.02, 181.0, 234.0, 24.45),
     ("go2", "mlp", 663.0, 1080.0, 6.10, 615.0, 1106.0, 26.19),
     ("go2", "l3p", 780.0, 948.0, 5.76, 1015.0, 1291.0, 25.30),
-    (
-        "go2",
-        "mlp-transfer",
-        678.0,
-        890.0,
-        5.96,
-        672.0,
-        1140.0,
-        25.67,
-    ),
-    (
-        "go2",
-        "l3p-transfer",
-        412.0,
-        477.0,
-        6.08,
-        214.0,
-        279.0,
-        25.88,
-    ),
+    ("go2", "mlp-transfer", 678.0, 890.0, 5.96, 672.0, 1140.0, 25.67),
+    ("go2", "l3p-transfer", 412.0, 477.0, 6.08, 214.0, 279.0, 25.88),
     ("anymal_b", "mlp", 609.0, 825.0, 5.86, 292.0, 378.0, 9.57),
     ("anymal_b", "l3p", 642.0, 917.0, 5.85, 313.0, 402.0, 9.85),
-    (
-        "anymal_b",
-        "mlp-transfer",
-        897.0,
-        1136.0,
-        5.84,
-        514.0,
-        848.0,
-        9.75,
-    ),
-    (
-        "anymal_b",
-        "l3p-transfer",
-        399.0,
-        459.0,
-        5.83,
-        147.0,
-        174.0,
-        13.20,
-    ),
+    ("anymal_b", "mlp-transfer", 897.0, 1136.0, 5.84, 514.0, 848.0, 9.75),
+    ("anymal_b", "l3p-transfer", 399.0, 459.0, 5.83, 147.0, 174.0, 13.20),
     ("anymal_c", "mlp", 499.0, 624.0, 6.10, 221.0, 299.0, 12.02),
     ("anymal_c", "l3p", 569.0, 829.0, 6.07, 266.0, 357.0, 11.38),
-    (
-        "anymal_c",
-        "mlp-transfer",
-        817.0,
-        1035.0,
-        6.17,
-        457.0,
-        593.0,
-        10.55,
-    ),
-    (
-        "anymal_c",
-        "l3p-transfer",
-        401.0,
-        488.0,
-        5.99,
-        123.0,
-        154.0,
-        13.41,
-    ),
+    ("anymal_c", "mlp-transfer", 817.0, 1035.0, 6.17, 457.0, 593.0, 10.55),
+    ("anymal_c", "l3p-transfer", 401.0, 488.0, 5.99, 123.0, 154.0, 13.41),
     ("anymal_d", "mlp", 588.0, 803.0, 6.12, 307.0, 408.0, 11.28),
     ("anymal_d", "l3p", 763.0, 1039.0, 6.03, 403.0, 945.0, 10.42),
-    (
-        "anymal_d",
-        "mlp-transfer",
-        1285.0,
-        1414.0,
-        5.28,
-        1233.0,
-        1431.0,
-        9.80,
-    ),
-    (
-        "anymal_d",
-        "l3p-transfer",
-        519.0,
-        695.0,
-        5.69,
-        172.0,
-        229.0,
-        11.49,
-    ),
+    ("anymal_d", "mlp-transfer", 1285.0, 1414.0, 5.28, 1233.0, 1431.0, 9.80),
+    ("anymal_d", "l3p-transfer", 519.0, 695.0, 5.69, 172.0, 229.0, 11.49),
     ("spot", "mlp", 834.0, 1283.0, 3.54, 261.0, 389.0, 162.26),
     ("spot", "l3p", 877.0, 936.0, 3.24, 258.0, 434.0, 160.40),
-    (
-        "spot",
-        "mlp-transfer",
-        897.0,
-        1344.0,
-        3.20,
-        429.0,
-        600.0,
-        135.26,
-    ),
-    (
-        "spot",
-        "l3p-transfer",
-        412.0,
-        864.0,
-        3.74,
-        171.0,
-        217.0,
-        181.99,
-    ),
+    ("spot", "mlp-transfer", 897.0, 1344.0, 3.20, 429.0, 600.0, 135.26),
+    ("spot", "l3p-transfer", 412.0, 864.0, 3.74, 171.0, 217.0, 181.99),
 ];
 
 /// The result table: one row per (robot, method), mean ± std over seeds, the paper's reward

@@ -11,11 +11,12 @@ use std::time::{Duration, Instant};
 
 use clap::{Args, Subcommand};
 use l3p_learner::report::{ReportRow, load_learner_records, series, smooth};
+use l3p_proto::MetricsRecord;
 
 use crate::config::Config;
 use crate::experiment::{
     Arm, ArmDone, ArmResult, ArmState, ExperimentSpec, Stage, arm_config_path, arm_state, band,
-    markdown_table, plan,
+    live_pid, markdown_table, plan, read_done,
 };
 
 #[derive(Debug, Args)]
@@ -214,23 +215,21 @@ fn run_cmd(spec_path: &Path) -> anyhow::Result<()> {
             if settled[k] || running.iter().any(|r| r.arm == k) {
                 continue;
             }
-            match arm_state(arm) {
-                ArmState::Done(_) => {
-                    settled[k] = true;
-                    continue;
-                }
-                ArmState::Running { pid, .. } => {
-                    // Another `experiment run` (or a scheduler) is training it.
-                    println!("arm {} is already running (pid {pid}); skipped", arm.name);
-                    settled[k] = true;
-                    continue;
-                }
-                _ => {}
+            // Polled every half second: only the marker files, never the metrics.
+            if read_done(arm).is_some() {
+                settled[k] = true;
+                continue;
+            }
+            if let Some(pid) = live_pid(arm) {
+                // Another `experiment run` (or a scheduler) is training it.
+                println!("arm {} is already running (pid {pid}); skipped", arm.name);
+                settled[k] = true;
+                continue;
             }
             if let Some(dep) = &arm.depends_on {
                 let dep_index = arms.iter().position(|a| &a.name == dep);
                 let dep_done = dep_index
-                    .map(|d| matches!(arm_state(&arms[d]), ArmState::Done(_)))
+                    .map(|d| read_done(&arms[d]).is_some())
                     .unwrap_or(false);
                 if !dep_done {
                     if failed.contains(dep) || dep_index.map(|d| settled[d]).unwrap_or(true) {
@@ -257,10 +256,7 @@ fn run_cmd(spec_path: &Path) -> anyhow::Result<()> {
         }
         std::thread::sleep(Duration::from_millis(500));
     }
-    let done = arms
-        .iter()
-        .filter(|a| matches!(arm_state(a), ArmState::Done(_)))
-        .count();
+    let done = arms.iter().filter(|a| read_done(a).is_some()).count();
     println!("{done}/{} arms done", arms.len());
     if !failed.is_empty() {
         anyhow::bail!(
@@ -415,17 +411,28 @@ fn evaluate(
     Ok(rows)
 }
 
+/// A finished arm with its `done.json` and learner records, read once for the report.
+struct Finished<'a> {
+    arm: &'a Arm,
+    done: ArmDone,
+    records: Vec<MetricsRecord>,
+}
+
+fn finished_arms(arms: &[Arm]) -> Vec<Finished<'_>> {
+    arms.iter()
+        .filter_map(|arm| {
+            let done = read_done(arm)?;
+            let records =
+                load_learner_records(&l3p_learner::daemon::metrics_path(&arm.run_dir())).ok()?;
+            Some(Finished { arm, done, records })
+        })
+        .collect()
+}
+
 /// The results of every finished arm.
-pub fn collect_results(arms: &[Arm], window: usize) -> Vec<ArmResult> {
+fn collect_results(finished: &[Finished], window: usize) -> Vec<ArmResult> {
     let mut out = Vec::new();
-    for arm in arms {
-        let ArmState::Done(done) = arm_state(arm) else {
-            continue;
-        };
-        let Ok(records) = load_learner_records(&l3p_learner::daemon::metrics_path(&arm.run_dir()))
-        else {
-            continue;
-        };
+    for Finished { arm, done, records } in finished {
         let robot = arm.robots.join("+");
         let mix = done
             .evaluations
@@ -435,7 +442,7 @@ pub fn collect_results(arms: &[Arm], window: usize) -> Vec<ArmResult> {
             robot,
             method: arm.method,
             seed: arm.seed,
-            row: ReportRow::from_records(&records, window),
+            row: ReportRow::from_records(records, window),
             wall_seconds: done.wall_seconds,
             eval_lin_vel_error: mix
                 .map(|r| r.summary.lin_vel_error as f64)
@@ -458,7 +465,8 @@ pub fn collect_results(arms: &[Arm], window: usize) -> Vec<ArmResult> {
 
 fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
     let (spec, arms) = load(spec_path)?;
-    let results = collect_results(&arms, window);
+    let finished = finished_arms(&arms);
+    let results = collect_results(&finished, window);
     if results.is_empty() {
         anyhow::bail!(
             "no arm of {} has finished yet\nhint: `l3p experiment status {}`",
@@ -500,14 +508,10 @@ fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
                 l3p_learner::Mode::MlpTransfer,
                 l3p_learner::Mode::L3pTransfer,
             ] {
-                let curves: Vec<Vec<(f64, f64)>> = arms
+                let curves: Vec<Vec<(f64, f64)>> = finished
                     .iter()
-                    .filter(|a| a.robots.join("+") == *robot && a.method == method)
-                    .filter(|a| matches!(arm_state(a), ArmState::Done(_)))
-                    .filter_map(|a| {
-                        load_learner_records(&l3p_learner::daemon::metrics_path(&a.run_dir())).ok()
-                    })
-                    .map(|records| smooth(&series(&records, key), window))
+                    .filter(|f| f.arm.robots.join("+") == *robot && f.arm.method == method)
+                    .map(|f| smooth(&series(&f.records, key), window))
                     .collect();
                 if !curves.is_empty() {
                     lines.push((

@@ -9,6 +9,9 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
+mod common;
+use common::TINY_FLAT_TASK;
+
 fn l3p(args: &[&str], cwd: &Path) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_l3p"))
         .args(args)
@@ -36,23 +39,8 @@ fn iterations(run_dir: &Path) -> Vec<u64> {
         .collect()
 }
 
-const BASE: &str = r#"
-[run]
-name = "unused"
-[env]
-height_scan = false
-episode_length_s = 2.0
-[env.terrain]
-preset = "flat"
-[model]
-encoder_hidden = [32]
-core_hidden = [32]
-decoder_hidden = [32]
-critic_hidden = [32]
-[model.recovery]
-obs_hidden = [32]
-diffusion_steps = 10
-eval_samples = 32
+/// The base config every arm starts from (after `[run]` and [`TINY_FLAT_TASK`]).
+const BASE_REST: &str = r#"
 [learner]
 checkpoint_every = 1
 [rollout]
@@ -87,7 +75,8 @@ forward = [0.5]
 fn an_interrupted_experiment_resumes_finishes_and_reports() {
     let dir = tempfile::tempdir().unwrap();
     let cwd = dir.path();
-    std::fs::write(cwd.join("base.toml"), BASE).unwrap();
+    let base = format!("[run]\nname = \"unused\"\n{TINY_FLAT_TASK}{BASE_REST}");
+    std::fs::write(cwd.join("base.toml"), base).unwrap();
     std::fs::write(cwd.join("micro.toml"), SPEC).unwrap();
     let exp = cwd.join("data/micro");
     let pretrain_run = exp.join("pretrain-l3p-s1/pretrain-l3p-s1");

@@ -4,6 +4,9 @@
 
 use std::process::Command;
 
+mod common;
+use common::TINY_FLAT_TASK;
+
 fn l3p(args: &[&str]) -> std::process::Output {
     Command::new(env!("CARGO_BIN_EXE_l3p"))
         .args(args)
@@ -17,21 +20,8 @@ fn local_mode_trains_checkpoints_and_evaluates() {
     let config = dir.path().join("run.toml");
     std::fs::write(
         &config,
-        r#"
-[run]
-name = "local"
-[env]
-height_scan = false
-[env.terrain]
-preset = "flat"
-[model]
-encoder_hidden = [32]
-core_hidden = [32]
-critic_hidden = [32]
-[model.recovery]
-obs_hidden = [32]
-diffusion_steps = 10
-eval_samples = 32
+        format!("[run]\nname = \"local\"\n{TINY_FLAT_TASK}")
+            + r#"
 [learner]
 max_policy_lag = 1
 max_iterations = 5
@@ -217,22 +207,8 @@ fn until_walks_records_every_walk_check() {
     let config = dir.path().join("run.toml");
     std::fs::write(
         &config,
-        r#"
-[run]
-name = "walks"
-[env]
-height_scan = false
-episode_length_s = 2.0
-[env.terrain]
-preset = "flat"
-[model]
-encoder_hidden = [32]
-core_hidden = [32]
-critic_hidden = [32]
-[model.recovery]
-obs_hidden = [32]
-diffusion_steps = 10
-eval_samples = 32
+        format!("[run]\nname = \"walks\"\n{TINY_FLAT_TASK}")
+            + r#"
 [learner]
 max_iterations = 4
 checkpoint_every = 1

@@ -450,6 +450,17 @@ fn non_finite_steps_are_skipped_and_only_repeated_divergence_stops_training() {
     }
 }
 
+/// 15 PPO updates of 32 point masses × 8 steps; the last update's metrics.
+fn train_point_mass(ppo: &mut Ppo, rng: &mut StdRng) -> UpdateMetrics {
+    let mut env = PointMass::new(32, 7);
+    let mut last = UpdateMetrics::default();
+    for _ in 0..15 {
+        let batch = collect(ppo.model(), &mut env, 8, rng);
+        last = ppo.update(&batch).unwrap();
+    }
+    last
+}
+
 /// The point mass mirrored in y: obs `[p.x, p.y, t.x, t.y]`, action `[a.x, a.y]`.
 fn point_mass_mirror() -> Mirror {
     Mirror {
@@ -490,13 +501,8 @@ fn the_symmetry_loss_makes_the_policy_mirror_symmetric() {
             ppo.set_mirror("pm", &point_mass_mirror()).unwrap();
         }
         let before = asymmetry(&ppo);
-        let mut env = PointMass::new(32, 7);
         let mut rng = StdRng::seed_from_u64(11);
-        let mut last = UpdateMetrics::default();
-        for _ in 0..15 {
-            let batch = collect(ppo.model(), &mut env, 8, &mut rng);
-            last = ppo.update(&batch).unwrap();
-        }
+        let last = train_point_mass(&mut ppo, &mut rng);
         (before, asymmetry(&ppo), last.symmetry_loss)
     };
     let (before, without, loss_off) = train(0.0);
@@ -544,13 +550,8 @@ fn train_smooth(start: &Ppo, coef: f32, order: u8) -> (f32, f32) {
     cfg.smoothness_coef = coef;
     cfg.smoothness_order = order;
     let mut ppo = Ppo::new(cfg, start.model().clone(), train_device()).unwrap();
-    let mut env = PointMass::new(32, 7);
     let mut rng = StdRng::seed_from_u64(11);
-    let mut last = UpdateMetrics::default();
-    for _ in 0..15 {
-        let batch = collect(ppo.model(), &mut env, 8, &mut rng);
-        last = ppo.update(&batch).unwrap();
-    }
+    let last = train_point_mass(&mut ppo, &mut rng);
     let batch = collect(ppo.model(), &mut PointMass::new(64, 3), 16, &mut rng);
     (
         mean_action_roughness(&batch, order as usize),

@@ -4,6 +4,25 @@
 use std::path::Path;
 use std::process::{Child, Command, Stdio};
 
+/// The `[env]` and `[model]` sections of a small, fast training run for process-level tests: flat
+/// ground, 2 s episodes, 32-unit layers, a 10-step diffusion.
+pub const TINY_FLAT_TASK: &str = r#"
+[env]
+height_scan = false
+episode_length_s = 2.0
+[env.terrain]
+preset = "flat"
+[model]
+encoder_hidden = [32]
+core_hidden = [32]
+decoder_hidden = [32]
+critic_hidden = [32]
+[model.recovery]
+obs_hidden = [32]
+diffusion_steps = 10
+eval_samples = 32
+"#;
+
 /// Kills its processes when dropped, so a failing test leaves nothing behind.
 pub struct Procs(pub Vec<(String, Child)>);
 
