@@ -299,6 +299,15 @@ pub fn format_rows(rows: &[EvalRow]) -> String {
             col(&|r| format!("{:.3} m/s", r.summary.lin_vel_error)),
         ),
         (
+            "mean velocity fwd / left",
+            col(&|r| {
+                gait(r, &|g| {
+                    let [f, l] = g.mean_heading_velocity;
+                    format!("{f:.2} / {l:.2} m/s")
+                })
+            }),
+        ),
+        (
             "yaw-rate tracking error",
             col(&|r| format!("{:.3} rad/s", r.summary.yaw_rate_error)),
         ),

@@ -58,6 +58,20 @@ envs = 4
         .filter(|l| l.contains("\"source\":\"learner\""))
         .count();
     assert_eq!(learner_lines, 5, "{metrics}");
+    // The same records as TensorBoard scalars, steps 1..=5, in the run's directory.
+    let events: Vec<_> = std::fs::read_dir(data.join("local"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.to_string_lossy().contains("events.out.tfevents."))
+        .collect();
+    assert_eq!(events.len(), 1, "{events:?}");
+    let steps: Vec<i64> = l3p_learner::tensorboard::read_events(&events[0])
+        .unwrap()
+        .iter()
+        .filter(|e| e.scalars.iter().any(|(t, _)| t == "Perf/total_fps"))
+        .map(|e| e.step)
+        .collect();
+    assert_eq!(steps, vec![1, 2, 3, 4, 5]);
     assert!(data.join("local/checkpoints/latest.ckpt").exists());
     // Local checkpoints at 2, 4 and 5 (shutdown); the registry keeps 4 and the final 5.
     let out = l3p(&[

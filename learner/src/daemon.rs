@@ -385,6 +385,15 @@ pub async fn run(
         source,
     })?;
     let metrics_file = metrics_path(&opts.run_dir);
+    // TensorBoard scalars beside metrics.jsonl; a failure to write them costs the curves, never
+    // the run.
+    let mut tensorboard = match crate::tensorboard::EventWriter::create(&opts.run_dir) {
+        Ok(w) => Some(w),
+        Err(e) => {
+            warn!(dir = %opts.run_dir.display(), "no TensorBoard events for this run: {e}");
+            None
+        }
+    };
     let run = opts.run.clone();
     let dims: HashMap<String, (usize, usize)> = opts
         .robots
@@ -689,6 +698,12 @@ pub async fn run(
         record.insert("transport_share", transport / iteration_seconds.max(1e-9));
         weights_seconds = 0.0;
         emit_metrics(&session, &metrics_file, &record).await?;
+        if let Some(w) = &mut tensorboard
+            && let Err(e) = w.write(&record)
+        {
+            warn!(path = %w.path().display(), "TensorBoard events stopped: {e}");
+            tensorboard = None;
+        }
         if new_version - last_checkpoint >= opts.daemon.checkpoint_every.max(1) {
             let to_registry = uploader.is_some()
                 && new_version - last_registry_checkpoint

@@ -20,6 +20,8 @@
 //!   actors) as a pure, unit-tested state machine.
 //! - [`uploader::RegistryUploader`]: the daemon's background registry uploads (retried with
 //!   backoff; an outage never stops training).
+//! - [`tensorboard::EventWriter`]: every metrics record also as TensorBoard scalars in the run's
+//!   directory (rsl_rl's tag names).
 //!
 //! Architecture invariant: no rapier; Zenoh is only used by the daemon module (not in this file set).
 
@@ -30,6 +32,7 @@ pub mod gather;
 pub mod ppo;
 pub mod report;
 pub mod storage;
+pub mod tensorboard;
 pub mod uploader;
 
 pub use gae::{compute_gae, explained_variance, normalize};

@@ -8,13 +8,16 @@
 //! 2. GAE with time-out bootstrapping ([`crate::gae`]), advantages normalised per robot over the
 //!    whole batch (rsl_rl normalises over its batch; one robot = one batch);
 //! 3. `R_obs` reconstruction error on observations not trained on yet (the fresh batch);
-//! 4. one random permutation per robot, reused by every epoch (rsl_rl); `epochs × minibatches`:
+//! 4. one random permutation per robot, reused by every epoch (rsl_rl; with `smoothness_coef` > 0
+//!    a permutation of whole env segments, so that neighbours in time share a minibatch); `epochs ×
+//!    minibatches`:
 //!    each minibatch takes the k-th slice of every robot's permutation, runs every robot through its
 //!    adapters and the shared core, computes the KL to the behaviour policy and adapts the learning
 //!    rate *before* the step, the clipped surrogate, the clipped value loss, the entropy bonus and
 //!    `λ (L_rec_obs + L_rec_act)`, with `symmetry_coef` > 0 the mirror loss on the same minibatch
 //!    mirrored left-right ([`Mirror`]), with `smoothness_coef` > 0 the temporal smoothness loss on
-//!    each sample's next observation, back-propagates, clips the global gradient norm and steps Adam.
+//!    the minibatch's own means at consecutive steps of an episode, back-propagates, clips the
+//!    global gradient norm and steps Adam.
 
 use std::time::Instant;
 
@@ -122,10 +125,10 @@ pub struct PpoConfig {
     /// every robot then needs a [`Mirror`] ([`Ppo::set_mirror`]).
     pub symmetry_coef: f32,
     /// Weight of the temporal smoothness loss `mean((μ(o_t) − μ(o_{t+1}))²)` (or the second
-    /// difference, `smoothness_order`) over consecutive
-    /// observations of one episode (CAPS, Mysore et al. 2021): the policy's mean may not jump
-    /// between neighbouring states, which penalises the joint-target chatter differentiably
-    /// instead of only through an action-rate reward. 0 = off.
+    /// difference, `smoothness_order`) over consecutive observations of one episode (CAPS, Mysore
+    /// et al. 2021): the policy's mean may not jump between neighbouring states, which penalises
+    /// the joint-target chatter differentiably instead of only through an action-rate reward.
+    /// 0 = off. When on, minibatches are whole env segments (`envs ≥ num_mini_batches`).
     pub smoothness_coef: f32,
     /// Which difference the smoothness loss penalises: 1 = `μ(o_{t+1}) − μ(o_t)` (every change,
     /// the fast but smooth motion of a quick gait included), 2 = `μ(o_{t+1}) − 2μ(o_t) + μ(o_{t−1})`
@@ -276,7 +279,8 @@ pub struct UpdateMetrics {
 /// Per-robot data prepared for minibatching.
 struct Prepared {
     robot: usize,
-    n: usize,
+    /// Minibatch size (samples).
+    mb: usize,
     obs_dim: usize,
     act_dim: usize,
     adv: Vec<f32>,
@@ -571,6 +575,13 @@ impl Ppo {
                     cfg.num_mini_batches
                 )));
             }
+            if cfg.smoothness_coef > 0.0 && r.envs < cfg.num_mini_batches {
+                return Err(LearnerError::Batch(format!(
+                    "robot {}: {} envs cannot fill {} minibatches (with ppo.smoothness_coef a \
+                     minibatch is whole env segments)",
+                    r.robot, r.envs, cfg.num_mini_batches
+                )));
+            }
             if cfg.symmetry_coef > 0.0 && self.mirrors[i].is_none() {
                 return Err(LearnerError::Config(format!(
                     "ppo.symmetry_coef = {} but robot {} has no mirror maps",
@@ -601,11 +612,25 @@ impl Ppo {
             normalize(&mut adv);
             ev_values.extend_from_slice(&values);
             ev_returns.extend_from_slice(&ret);
-            let mut perm: Vec<usize> = (0..r.samples()).collect();
-            perm.shuffle(&mut self.rng);
+            // With the smoothness loss a minibatch is whole env segments (rsl_rl's recurrent
+            // split), so each sample's neighbours in time share its forward pass; otherwise
+            // samples are shuffled individually, as rsl_rl's feed-forward PPO.
+            let (perm, mb) = if cfg.smoothness_coef > 0.0 {
+                let mut envs: Vec<usize> = (0..r.envs).collect();
+                envs.shuffle(&mut self.rng);
+                let perm = envs
+                    .iter()
+                    .flat_map(|&e| (0..r.steps).map(move |t| t * r.envs + e))
+                    .collect();
+                (perm, (r.envs / cfg.num_mini_batches) * r.steps)
+            } else {
+                let mut perm: Vec<usize> = (0..r.samples()).collect();
+                perm.shuffle(&mut self.rng);
+                (perm, r.samples() / cfg.num_mini_batches)
+            };
             prepared.push(Prepared {
                 robot: i,
-                n: r.samples(),
+                mb,
                 obs_dim: r.obs_dim,
                 act_dim: r.action_dim,
                 adv,
@@ -620,7 +645,7 @@ impl Ppo {
         drop(net_eval);
 
         // 4. Epochs × minibatches.
-        let total: usize = prepared.iter().map(|p| p.n / cfg.num_mini_batches).sum();
+        let total: usize = prepared.iter().map(|p| p.mb).sum();
         let lambda = self.model.config.recovery.lambda;
         let mut acc = Acc::default();
         for _epoch in 0..cfg.num_learning_epochs {
@@ -628,31 +653,19 @@ impl Ppo {
                 let acc_before = acc.clone();
                 let mut obs_t = Vec::with_capacity(self.model.robots.len());
                 obs_t.resize_with(self.model.robots.len(), || None);
-                let mut next_t: Vec<Option<Tensor<2>>> = Vec::with_capacity(obs_t.len());
-                next_t.resize_with(obs_t.len(), || None);
-                let mut prev_t: Vec<Option<Tensor<2>>> = Vec::with_capacity(obs_t.len());
-                prev_t.resize_with(obs_t.len(), || None);
-                let mut next_valid = vec![0usize; obs_t.len()];
                 let mut per_robot = Vec::with_capacity(prepared.len());
                 for (p, r) in prepared.iter().zip(&batch.robots) {
-                    let mb = p.n / cfg.num_mini_batches;
+                    let mb = p.mb;
                     let idx = &p.perm[k * mb..(k + 1) * mb];
                     let g = Gathered::new(r, p, idx);
                     obs_t[p.robot] = Some(self.tensor2(g.obs.clone(), mb, p.obs_dim));
-                    if cfg.smoothness_coef > 0.0 {
-                        let n = neighbour_observations(r, idx, cfg.smoothness_order);
-                        next_t[p.robot] = Some(self.tensor2(n.next, mb, p.obs_dim));
-                        prev_t[p.robot] = n.prev.map(|v| self.tensor2(v, mb, p.obs_dim));
-                        next_valid[p.robot] = n.valid;
-                    }
-                    per_robot.push((mb, g));
+                    let neighbours = (cfg.smoothness_coef > 0.0)
+                        .then(|| NeighbourRows::new(r, idx, cfg.smoothness_order))
+                        .filter(|n| !n.current.is_empty())
+                        .map(|n| n.tensors(&self.device));
+                    per_robot.push((mb, g, neighbours));
                 }
                 let outs = self.model.net.actors(obs_t.clone());
-                // Every sample's next observation in its episode, for the smoothness loss.
-                let next_outs =
-                    (cfg.smoothness_coef > 0.0).then(|| self.model.net.actors(next_t.clone()));
-                let prev_outs = (cfg.smoothness_coef > 0.0 && cfg.smoothness_order == 2)
-                    .then(|| self.model.net.actors(prev_t.clone()));
                 // The same minibatch mirrored left-right, for the symmetry loss.
                 let mirrored_outs = (cfg.symmetry_coef > 0.0).then(|| {
                     let mirrored = obs_t
@@ -667,7 +680,7 @@ impl Ppo {
                 });
                 let mut loss_total: Option<Tensor<1>> = None;
                 let mut mb_kl = 0f32;
-                for ((mb, g), p) in per_robot.into_iter().zip(&prepared) {
+                for ((mb, g, neighbours), p) in per_robot.into_iter().zip(&prepared) {
                     let w = mb as f32 / total as f32;
                     let out = outs[p.robot]
                         .clone()
@@ -740,25 +753,15 @@ impl Ppo {
                         acc.symmetry += w * scalar(l.clone().detach())?;
                         loss = loss.add(l.mul_scalar(cfg.symmetry_coef));
                     }
-                    if let Some(next_outs) = &next_outs
-                        && next_valid[p.robot] > 0
-                    {
-                        let out_next = next_outs[p.robot]
-                            .as_ref()
-                            .ok_or_else(|| LearnerError::Batch("missing next output".into()))?;
-                        // Rows without neighbours in the episode hold their own observation, so
-                        // they add zero; the mean is over the valid rows.
-                        let mut diff = out_next.mean.clone().sub(out.mean.clone());
-                        if let Some(prev_outs) = &prev_outs {
-                            let out_prev = prev_outs[p.robot].as_ref().ok_or_else(|| {
-                                LearnerError::Batch("missing previous output".into())
-                            })?;
-                            diff = diff.sub(out.mean.clone().sub(out_prev.mean.clone()));
+                    if let Some(n) = neighbours {
+                        // μ of each sample's neighbours in time, from this same forward pass.
+                        let at = |rows: &Tensor<1, Int>| out.mean.clone().select(0, rows.clone());
+                        let current = at(&n.current);
+                        let mut diff = at(&n.next).sub(current.clone());
+                        if let Some(prev) = &n.prev {
+                            diff = diff.sub(current.sub(at(prev)));
                         }
-                        let l = diff
-                            .square()
-                            .sum()
-                            .div_scalar((next_valid[p.robot] * p.act_dim) as f32);
+                        let l = diff.square().mean();
                         acc.smoothness += w * scalar(l.clone().detach())?;
                         loss = loss.add(l.mul_scalar(cfg.smoothness_coef));
                     }
@@ -956,52 +959,65 @@ impl Gathered {
     }
 }
 
-/// Each sample's neighbouring observations in its episode, for the smoothness loss.
-struct Neighbours {
-    next: Vec<f32>,
+/// Rows of a minibatch that have their neighbours in time within it, for the smoothness loss:
+/// `current[k]`, `next[k]` (and for order 2 `prev[k]`) are rows of the same episode at `t`, `t + 1`
+/// (`t − 1`).
+struct NeighbourRows {
+    current: Vec<i64>,
+    next: Vec<i64>,
     /// Order 2 only.
-    prev: Option<Vec<f32>>,
-    /// Samples that have every neighbour the order needs.
-    valid: usize,
+    prev: Option<Vec<i64>>,
 }
 
-/// The observations after (and for order 2 before) each sample `idx[k]` in its episode
-/// (step-major rollout: sample `t · envs + e`; the last step's successor is the rollout's
-/// `last_observations`). A sample without them — its episode ended there (terminated or
-/// truncated), or for order 2 began there or at the rollout's start — gets its own observation
-/// back in every slot, so its difference is zero.
-fn neighbour_observations(
-    r: &crate::storage::RobotRollout,
-    idx: &[usize],
-    order: u8,
-) -> Neighbours {
-    let d = r.obs_dim;
-    let own = |j: usize| &r.observations[j * d..(j + 1) * d];
-    let mut next = Vec::with_capacity(idx.len() * d);
-    let mut prev = (order == 2).then(|| Vec::with_capacity(idx.len() * d));
-    let mut valid = 0;
-    for &j in idx {
-        let (t, e) = (j / r.envs, j % r.envs);
-        let has_next = !(r.terminated[j] || r.truncated[j]);
-        let has_prev = t > 0 && !(r.terminated[j - r.envs] || r.truncated[j - r.envs]);
-        if has_next && (order == 1 || has_prev) {
-            valid += 1;
-            next.extend_from_slice(if t + 1 < r.steps {
-                own(j + r.envs)
-            } else {
-                &r.last_observations[e * d..(e + 1) * d]
-            });
-            if let Some(p) = prev.as_mut() {
-                p.extend_from_slice(own(j - r.envs));
+/// [`NeighbourRows`] as index tensors.
+struct NeighbourTensors {
+    current: Tensor<1, Int>,
+    next: Tensor<1, Int>,
+    prev: Option<Tensor<1, Int>>,
+}
+
+impl NeighbourRows {
+    /// `idx` is a minibatch of whole env segments in time order (step-major rollout: sample
+    /// `t · envs + e`). A row has a next neighbour unless its episode ended there (terminated or
+    /// truncated) or it is the segment's last step; for order 2 also a previous one unless its
+    /// episode began there or it is the segment's first step.
+    fn new(r: &crate::storage::RobotRollout, idx: &[usize], order: u8) -> Self {
+        let done = |j: usize| r.terminated[j] || r.truncated[j];
+        let (mut current, mut next) = (Vec::new(), Vec::new());
+        let mut prev = (order == 2).then(Vec::new);
+        for (row, pair) in idx.windows(2).enumerate() {
+            let (j, j_next) = (pair[0], pair[1]);
+            // Consecutive rows of one env's segment are `envs` samples apart.
+            if j_next != j + r.envs || done(j) {
+                continue;
             }
-        } else {
-            next.extend_from_slice(own(j));
             if let Some(p) = prev.as_mut() {
-                p.extend_from_slice(own(j));
+                if row == 0 || idx[row - 1] + r.envs != j || done(idx[row - 1]) {
+                    continue;
+                }
+                p.push(row as i64 - 1);
             }
+            current.push(row as i64);
+            next.push(row as i64 + 1);
+        }
+        NeighbourRows {
+            current,
+            next,
+            prev,
         }
     }
-    Neighbours { next, prev, valid }
+
+    fn tensors(self, device: &Device) -> NeighbourTensors {
+        let index = |v: Vec<i64>| {
+            let n = v.len();
+            Tensor::<1, Int>::from_data(TensorData::new(v, [n]), device)
+        };
+        NeighbourTensors {
+            current: index(self.current),
+            next: index(self.next),
+            prev: self.prev.map(index),
+        }
+    }
 }
 
 /// rsl_rl's KL estimate between the behaviour policy `N(old_mu, old_sigma)` and the current

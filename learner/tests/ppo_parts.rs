@@ -583,6 +583,64 @@ fn the_smoothness_loss_makes_the_mean_action_change_less_between_steps() {
     assert!(err.contains("smoothness_order = 3"), "{err}");
 }
 
+/// Mean over a rollout of (μ_{t+1} − μ_t)² (order 1) or (μ_{t+1} − 2μ_t + μ_{t−1})² (order 2) over
+/// steps of one episode, every action dimension; episodes end only at `end_step` (in every env).
+fn mean_squared_difference(r: &RobotRollout, order: u8, end_step: Option<usize>) -> f32 {
+    let mean = |t: usize, e: usize, k: usize| r.action_means[(t * r.envs + e) * ACT + k];
+    let ends = |t: usize| end_step == Some(t);
+    let (mut sum, mut n) = (0.0f64, 0usize);
+    for t in 0..r.steps - 1 {
+        if ends(t) || (order == 2 && (t == 0 || ends(t - 1))) {
+            continue;
+        }
+        for e in 0..r.envs {
+            for k in 0..ACT {
+                let d = match order {
+                    1 => mean(t + 1, e, k) - mean(t, e, k),
+                    _ => mean(t + 1, e, k) - 2.0 * mean(t, e, k) + mean(t - 1, e, k),
+                };
+                sum += (d * d) as f64;
+                n += 1;
+            }
+        }
+    }
+    (sum / n as f64) as f32
+}
+
+#[test]
+fn the_smoothness_loss_is_the_rollouts_own_mean_squared_difference() {
+    // At a learning rate too small to move an f32 parameter (0 is refused) every minibatch sees
+    // the behaviour policy, and with episode ends at the
+    // same step in every env each minibatch (whole env segments) holds as many pairs, so the
+    // reported loss is the rollout's own mean squared difference: each row must be paired with
+    // its own env's neighbours, and never across an episode's end.
+    let start = mlp_ppo();
+    let mut rng = StdRng::seed_from_u64(5);
+    let mut batch = collect(start.model(), &mut PointMass::new(32, 9), 8, &mut rng);
+    for end_step in [None, Some(2)] {
+        let r = &mut batch.robots[0];
+        for (j, d) in r.terminated.iter_mut().enumerate() {
+            *d = end_step == Some(j / r.envs);
+        }
+        r.truncated.iter_mut().for_each(|d| *d = false);
+        for order in [1u8, 2] {
+            let mut cfg = start.config().clone();
+            cfg.smoothness_coef = 1.0;
+            cfg.smoothness_order = order;
+            cfg.learning_rate = 1e-30;
+            cfg.schedule = Schedule::Fixed;
+            let mut ppo = Ppo::new(cfg, start.model().clone(), train_device()).unwrap();
+            let reported = ppo.update(&batch).unwrap().smoothness_loss;
+            let expected = mean_squared_difference(&batch.robots[0], order, end_step);
+            assert!(
+                (reported - expected).abs() <= 1e-3 * expected,
+                "order {order}, episodes ending at {end_step:?}: reported {reported}, by hand \
+                 {expected}"
+            );
+        }
+    }
+}
+
 #[test]
 fn a_symmetry_loss_without_a_valid_mirror_is_a_clear_error() {
     let base = mlp_ppo();

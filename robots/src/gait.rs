@@ -9,6 +9,8 @@
 //! - joint-target change per control step, RMS over joints and steps (rad): the chatter measure;
 //! - mean |τ| (N·m) and mean mechanical power Σ|τ·q̇| (W);
 //! - per episode, the heading change (rad, unwrapped), meaningful with a zero yaw command;
+//! - mean base velocity in the heading frame (forward, left): tells a robot that is too slow from
+//!   one whose speed swings within each stride, which the tracking error alone cannot;
 //! - tracking errors and falls come from the episode statistics (`EpisodeSummary`).
 
 use serde::{Deserialize, Serialize};
@@ -48,6 +50,8 @@ pub struct GaitMeter {
     joint_second_diff_sq_sum: [f64; NUM_JOINTS],
     abs_torque_sum: f64,
     power_sum: f64,
+    /// Σ base velocity in the heading frame (forward, left).
+    heading_vel_sum: [f64; 2],
     // per-episode state
     prev_targets: Option<[f32; NUM_JOINTS]>,
     prev_change: Option<[f32; NUM_JOINTS]>,
@@ -127,6 +131,10 @@ impl GaitMeter {
         self.abs_torque_sum += (tau / NUM_JOINTS as f32) as f64;
         self.power_sum += power as f64;
         let yaw = yaw_of(st.base_quat);
+        let (sin, cos) = yaw.sin_cos();
+        let [vx, vy, _] = st.base_lin_vel_w;
+        self.heading_vel_sum[0] += (cos * vx + sin * vy) as f64;
+        self.heading_vel_sum[1] += (cos * vy - sin * vx) as f64;
         if let Some(prev) = self.prev_yaw {
             self.episode_heading_change += wrap_to_pi(yaw - prev);
         }
@@ -166,6 +174,9 @@ impl GaitMeter {
         }
         self.abs_torque_sum += other.abs_torque_sum;
         self.power_sum += other.power_sum;
+        for k in 0..2 {
+            self.heading_vel_sum[k] += other.heading_vel_sum[k];
+        }
         self.heading_changes
             .extend_from_slice(&other.heading_changes);
         self.episode_seconds += other.episode_seconds;
@@ -214,6 +225,7 @@ impl GaitMeter {
             mean_abs_torque: (self.abs_torque_sum / n) as f32,
             mean_power: (self.power_sum / n) as f32,
             heading_drift_rad: drift,
+            mean_heading_velocity: self.heading_vel_sum.map(|v| (v / n) as f32),
         }
     }
 }
@@ -251,6 +263,10 @@ pub struct GaitReport {
     pub mean_power: f32,
     /// Mean |heading change| over an episode (rad).
     pub heading_drift_rad: f32,
+    /// Mean base velocity in the heading frame, [forward, left] (m/s). Absent in reports written
+    /// before it existed.
+    #[serde(default)]
+    pub mean_heading_velocity: [f32; 2],
 }
 
 /// The walk criterion (issue "A real trot"): every bound must hold.
@@ -477,6 +493,31 @@ mod tests {
     }
 
     #[test]
+    fn mean_velocity_is_in_the_heading_frame() {
+        // Facing +y (yaw 90°) and moving at 0.8 m/s along +y, then drifting 0.2 m/s along −x (to
+        // the robot's left): forward 0.8, left 0.2 whatever the world axes.
+        let mut state = RobotState {
+            base_quat: quat_from_yaw(std::f32::consts::FRAC_PI_2),
+            base_lin_vel_w: [-0.2, 0.8, 0.1],
+            ..Default::default()
+        };
+        let mut meter = GaitMeter::new();
+        for _ in 0..4 {
+            meter.record(&sample(&state, &[0.0; NUM_JOINTS]));
+        }
+        // A second env facing +x, standing still: the mean is over both.
+        state.base_quat = quat_from_yaw(0.0);
+        state.base_lin_vel_w = [0.0; 3];
+        let mut other = GaitMeter::new();
+        for _ in 0..4 {
+            other.record(&sample(&state, &[0.0; NUM_JOINTS]));
+        }
+        meter.merge(&other);
+        let [f, l] = meter.report(0.3).mean_heading_velocity;
+        assert!((f - 0.4).abs() < 1e-5 && (l - 0.1).abs() < 1e-5, "{f} {l}");
+    }
+
+    #[test]
     fn a_clean_walk_passes_the_criterion() {
         let g = GaitReport {
             steps: 1000,
@@ -493,6 +534,7 @@ mod tests {
             mean_abs_torque: 3.0,
             mean_power: 40.0,
             heading_drift_rad: 0.1,
+            mean_heading_velocity: [0.5, 0.0],
         };
         let t = TrackingSummary {
             lin_vel_error: 0.1,
