@@ -1,7 +1,7 @@
 //! Deploy end to end over real processes on loopback Zenoh: `l3p registry serve`, `l3p sim-robot`
-//! and `l3p deploy`. A policy trained by `l3p train configs/a1-flat.toml` (session 6's trot with a
-//! gait clock, an action filter and the smoothness loss, exported under docs/a1-flat-session6/policy) walks the simulated
-//! A1 at a normal height; when the state stream stops the controller
+//! and `l3p deploy`. A policy trained by `l3p train configs/a1-flat.toml` (session 7's trot: gait
+//! clock, action filter, smoothness loss, kp 60 / kd 1.2, the first to meet the whole walk
+//! criterion; exported under docs/a1-flat-session7/policy) walks the simulated A1 at a normal height; when the state stream stops the controller
 //! damps within 3 periods and stays damped until `l3p operate resume`; a NaN-producing policy is damped;
 //! a policy for another robot is refused before any command is sent.
 
@@ -16,7 +16,7 @@ use l3p_proto::{ControlMode, DeployStatus, RobotCommand, codec, keys};
 use l3p_registry::net::{ZenohSettings, free_loopback_port, open_session};
 
 fn trained_policy() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session6/policy/policy.safetensors")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session7/policy/policy.safetensors")
 }
 
 /// A free loopback port other than `taken`, and its endpoint, for the controller to listen on.
