@@ -111,17 +111,18 @@ pub fn robot_io(robot: &RobotSpec, env: &EnvConfig) -> Result<RobotIo, DeployErr
              ticks = policy steps since the policy took over (0 at its first step)",
         ));
     }
-    // The gains the policy was trained around: the catalog's, scaled by the centre of the
-    // config's kp/kd randomisation (a config that trains stiffer says so here, and deploy uses it).
+    // The gains the policy was trained around: the catalog's (or `[env.gains.<robot>]`), scaled by
+    // the centre of the config's kp/kd randomisation; deploy uses them.
     let randomization = env.randomization(robot.name);
+    let gains = env.training_gains(robot);
     let mid = |r: [f32; 2]| 0.5 * (r[0] + r[1]);
     Ok(RobotIo {
         version: IO_VERSION,
         control_dt: env.sim_dt * env.decimation as f32,
         joint_names: robot.joint_names.iter().map(|s| s.to_string()).collect(),
         default_joint_pos: robot.default_pose.to_vec(),
-        kp: vec![robot.training_gains.kp * mid(randomization.kp_scale); n],
-        kd: vec![robot.training_gains.kd * mid(randomization.kd_scale); n],
+        kp: vec![gains.kp * mid(randomization.kp_scale); n],
+        kd: vec![gains.kd * mid(randomization.kd_scale); n],
         soft_joint_limits: params.soft_limits().to_vec(),
         effort_limit: robot.effort_limit.to_vec(),
         action_clip: env.action_clip,

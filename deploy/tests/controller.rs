@@ -8,7 +8,7 @@ use l3p_deploy::{Controller, Fault, ObservationBuilder, SafetyConfig, load_polic
 use l3p_policy::RobotIo;
 use l3p_proto::{ControlMode, OperatorAction, RobotState};
 use l3p_robots::catalog::RobotSpec;
-use l3p_robots::config::{EnvConfig, TerrainPreset};
+use l3p_robots::config::{EnvConfig, GainsOverride, TerrainPreset};
 use l3p_robots::task::{Task, TaskEnvState, quat_from_yaw_and_tilt, quat_rotate_inverse};
 use l3p_robots::terrain::Terrain;
 use rand::rngs::StdRng;
@@ -643,4 +643,17 @@ fn the_contract_carries_the_gains_the_policy_was_trained_around() {
             .iter()
             .all(|k| (k - 2.0 * robot.training_gains.kd).abs() < 1e-4)
     );
+    // Per-robot gains (`[env.gains.a1]`) replace the catalog's, and the randomisation scales them.
+    env.gains.insert(
+        "a1".into(),
+        GainsOverride {
+            kp: Some(60.0),
+            kd: Some(1.2),
+        },
+    );
+    env.randomization.kp_scale = Some([0.85, 1.15]);
+    env.randomization.kd_scale = Some([0.9, 1.3]);
+    let io = robot_io(robot, &env).unwrap();
+    assert!(io.kp.iter().all(|k| (k - 60.0).abs() < 1e-3), "{:?}", io.kp);
+    assert!(io.kd.iter().all(|k| (k - 1.32).abs() < 1e-4), "{:?}", io.kd);
 }

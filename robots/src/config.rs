@@ -6,7 +6,8 @@
 //!   `Default` is the IsaacLab 2.1 rough-terrain velocity task (`velocity_env_cfg.py`), see
 //!   `reference/locomotion-env-and-ppo.md` §1–§2.
 //! - [`TerrainConfig`] (preset `flat | simple-rough | curriculum | paper` plus range overrides),
-//!   [`CommandConfig`], [`NoiseConfig`], [`TerminationConfig`], [`RewardParams`].
+//!   [`CommandConfig`], [`NoiseConfig`], [`TerminationConfig`], [`RewardParams`], and per-robot PD
+//!   gains ([`GainsOverride`], `[env.gains.<robot>]`).
 //! - [`RewardScales`] with the IsaacLab per-robot tables ([`RewardScales::for_robot`]) and
 //!   [`RandomizationConfig`] ([`RandomizationConfig::for_robot`]); the TOML side holds
 //!   [`RewardOverrides`] / [`RandomizationOverrides`] (every field optional) that are applied on top of
@@ -14,9 +15,12 @@
 //! - [`EnvConfig::resolve`] → [`TaskSpec`]: everything concrete for one robot, validated
 //!   ([`ConfigError`] names the key).
 
+use std::collections::BTreeMap;
+
 use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
+use crate::catalog::{Gains, RobotSpec};
 use crate::terrain::{SubTerrainParams, TerrainSpec, TerrainType, TypeProportions};
 
 /// Errors of configuration parsing and validation.
@@ -412,6 +416,8 @@ impl Default for TerminationConfig {
 pub struct RewardParams {
     /// Standard deviation of the tracking kernels, `exp(−err²/std²)`. IsaacLab: sqrt(0.25) = 0.5.
     pub tracking_std: f32,
+    /// Standard deviation of `track_lin_vel_xy_coarse_exp`'s wide kernel (m/s).
+    pub coarse_tracking_std: f32,
     /// Feet air-time threshold (s). IsaacLab: 0.5.
     pub air_time_threshold: f32,
     /// Air-time reward is zero when `‖cmd_xy‖ ≤` this (m/s). IsaacLab: 0.1.
@@ -430,6 +436,7 @@ impl Default for RewardParams {
     fn default() -> Self {
         RewardParams {
             tracking_std: 0.5,
+            coarse_tracking_std: 1.0,
             air_time_threshold: 0.5,
             air_time_min_command: 0.1,
             contact_threshold: 1.0,
@@ -466,6 +473,10 @@ reward_terms! {
     /// Share of feet whose contact matches the trot clock's pattern (`task::gait_clock_stance`),
     /// when commanded to move and `gait_clock_hz` > 0.
     GaitClock => gait_clock = 0.0,
+    /// `exp(−err²/coarse_tracking_std²)` of the xy tracking error: a wide kernel that still rises
+    /// when the robot is far from its command (standing at a 1 m/s command the sharp kernel with
+    /// std 0.35 pays e⁻⁸ and its gradient has vanished).
+    TrackLinVelXyCoarseExp => track_lin_vel_xy_coarse_exp = 0.0,
 }
 
 impl RewardScales {
@@ -710,6 +721,31 @@ pub struct EnvConfig {
     pub reward_params: RewardParams,
     pub rewards: RewardOverrides,
     pub randomization: RandomizationOverrides,
+    /// PD gains trained around, per robot (`[env.gains.a1] kp = 60.0`), replacing the catalog's
+    /// `training_gains` for that robot only; `randomization.kp_scale`/`kd_scale` scale around them
+    /// and the export's `io` carries them. Robots not named keep their catalog gains, so one config
+    /// can tune A1 and still train other robots as the catalog describes them.
+    pub gains: BTreeMap<String, GainsOverride>,
+}
+
+/// `[env.gains.<robot>]`: PD gains for one robot; an absent key keeps the catalog's value.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct GainsOverride {
+    /// Stiffness (N·m/rad).
+    pub kp: Option<f32>,
+    /// Damping (N·m·s/rad).
+    pub kd: Option<f32>,
+}
+
+impl GainsOverride {
+    /// `base` with this override's values in place of its own.
+    pub fn apply(&self, base: Gains) -> Gains {
+        Gains {
+            kp: self.kp.unwrap_or(base.kp),
+            kd: self.kd.unwrap_or(base.kd),
+        }
+    }
 }
 
 impl Default for EnvConfig {
@@ -731,6 +767,7 @@ impl Default for EnvConfig {
             reward_params: RewardParams::default(),
             rewards: RewardOverrides::default(),
             randomization: RandomizationOverrides::default(),
+            gains: BTreeMap::new(),
         }
     }
 }
@@ -812,6 +849,7 @@ max_tilt_rad = 1.4
 
 [reward_params]
 tracking_std = 0.5
+coarse_tracking_std = 1.0
 air_time_threshold = 0.5
 air_time_min_command = 0.1
 contact_threshold = 1.0
@@ -837,6 +875,8 @@ base_height_fraction = 1.0
 # trot_contact = 0.5
 # joint_deviation_l1 = -0.1
 # action_smoothness_l2 = -0.1 (and action_rate_l2 = -0.05; both on the policy's mean action)
+# gait_clock = 0.0
+# track_lin_vel_xy_coarse_exp = 0.0
 
 # Randomisation defaults to the robot's IsaacLab events (RandomizationConfig::for_robot).
 [randomization]
@@ -858,6 +898,12 @@ base_height_fraction = 1.0
 # kp_scale = [0.85, 1.15]
 # kd_scale = [0.85, 1.15]
 # latency_s = [0.0, 0.02]
+
+# PD gains per robot, replacing its catalog training gains (`l3p robots list`); kp_scale and
+# kd_scale randomise around them. Robots not named keep the catalog's.
+# [gains.a1]
+# kp = 60.0
+# kd = 1.2
 "#;
 
 /// Number of proprioceptive observations.
@@ -902,6 +948,8 @@ pub struct TaskSpec {
     pub reward_params: RewardParams,
     pub rewards: RewardScales,
     pub randomization: RandomizationConfig,
+    /// `[env.gains.<robot>]` for this robot (empty: the catalog's training gains).
+    pub gains: GainsOverride,
 }
 
 fn check_range(key: &str, r: [f32; 2]) -> Result<(), ConfigError> {
@@ -973,9 +1021,31 @@ impl EnvConfig {
         r
     }
 
+    /// The PD gains `spec` trains around: the catalog's, with `[env.gains.<robot>]` applied.
+    pub fn training_gains(&self, spec: &RobotSpec) -> Gains {
+        self.gains
+            .get(spec.name)
+            .map_or(spec.training_gains, |g| g.apply(spec.training_gains))
+    }
+
     /// Resolves and validates everything for `robot`.
     pub fn resolve(&self, robot: &str) -> Result<TaskSpec, ConfigError> {
         check_pos("sim_dt", self.sim_dt)?;
+        for (name, g) in &self.gains {
+            if RobotSpec::by_name(name).is_err() {
+                let known: Vec<&str> = RobotSpec::all().iter().map(|s| s.name).collect();
+                return Err(invalid(
+                    &format!("gains.{name}"),
+                    format!("no robot named {name:?} (known: {})", known.join(", ")),
+                ));
+            }
+            if let Some(kp) = g.kp {
+                check_pos(&format!("gains.{name}.kp"), kp)?;
+            }
+            if let Some(kd) = g.kd {
+                check_pos(&format!("gains.{name}.kd"), kd)?;
+            }
+        }
         if self.decimation == 0 {
             return Err(invalid("decimation", "expected >= 1"));
         }
@@ -1037,6 +1107,7 @@ impl EnvConfig {
         }
         let rp = &self.reward_params;
         check_pos("reward_params.tracking_std", rp.tracking_std)?;
+        check_pos("reward_params.coarse_tracking_std", rp.coarse_tracking_std)?;
         check_nonneg("reward_params.air_time_threshold", rp.air_time_threshold)?;
         check_nonneg(
             "reward_params.air_time_min_command",
@@ -1115,6 +1186,7 @@ impl EnvConfig {
             reward_params: self.reward_params.clone(),
             rewards,
             randomization: rz,
+            gains: self.gains.get(robot).copied().unwrap_or_default(),
         })
     }
 }
@@ -1258,6 +1330,45 @@ mod tests {
             spec.rewards.flat_orientation_l2, 0.0,
             "simple-rough uses the rough table"
         );
+    }
+
+    #[test]
+    fn gains_override_one_robot_and_leave_the_others_at_the_catalog() {
+        let cfg =
+            EnvConfig::from_toml_str("[gains.a1]\nkp = 60.0\nkd = 1.2\n[gains.go1]\nkd = 0.9\n")
+                .unwrap();
+        let a1 = RobotSpec::by_name("a1").unwrap();
+        let go1 = RobotSpec::by_name("go1").unwrap();
+        let spot = RobotSpec::by_name("spot").unwrap();
+        assert_eq!(cfg.training_gains(a1), Gains { kp: 60.0, kd: 1.2 });
+        assert_eq!(
+            cfg.training_gains(go1),
+            Gains {
+                kp: go1.training_gains.kp,
+                kd: 0.9
+            }
+        );
+        assert_eq!(cfg.training_gains(spot), spot.training_gains);
+        let task = cfg.resolve("a1").unwrap();
+        assert_eq!(
+            task.gains.apply(a1.training_gains),
+            Gains { kp: 60.0, kd: 1.2 }
+        );
+        assert_eq!(cfg.resolve("spot").unwrap().gains, GainsOverride::default());
+    }
+
+    #[test]
+    fn gains_for_an_unknown_robot_or_a_bad_value_are_errors_naming_the_key() {
+        let cfg = EnvConfig::from_toml_str("[gains.a2]\nkp = 60.0\n").unwrap();
+        let msg = cfg.resolve("a1").unwrap_err().to_string();
+        assert!(msg.contains("gains.a2") && msg.contains("a1, go1"), "{msg}");
+        for bad in ["0.0", "-5.0", "nan", "inf"] {
+            let cfg = EnvConfig::from_toml_str(&format!("[gains.a1]\nkd = {bad}\n")).unwrap();
+            let msg = cfg.resolve("a1").unwrap_err().to_string();
+            assert!(msg.contains("gains.a1.kd"), "{bad}: {msg}");
+        }
+        let err = EnvConfig::from_toml_str("[gains.a1]\nkp_scale = 2.0\n").unwrap_err();
+        assert!(err.to_string().contains("kp_scale"), "{err}");
     }
 
     #[test]

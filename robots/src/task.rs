@@ -844,6 +844,8 @@ impl Task {
         let lin_err_sq = ex * ex + ey * ey;
         let ang_err = cmd.wz - w[2];
         raw[RewardTerm::TrackLinVelXyExp as usize] = (-lin_err_sq * inv_var).exp();
+        raw[RewardTerm::TrackLinVelXyCoarseExp as usize] =
+            (-lin_err_sq / (p.coarse_tracking_std * p.coarse_tracking_std)).exp();
         raw[RewardTerm::TrackAngVelZExp as usize] = (-ang_err * ang_err * inv_var).exp();
         raw[RewardTerm::LinVelZL2 as usize] = v[2] * v[2];
         raw[RewardTerm::AngVelXyL2 as usize] = w[0] * w[0] + w[1] * w[1];
@@ -1233,6 +1235,52 @@ mod tests {
         let got = r.terms[RewardTerm::TrackLinVelXyExp as usize];
         assert!((got - 1.5 * dt * (-1.0f32).exp()).abs() < 1e-6, "{got}");
         assert!(!r.done());
+    }
+
+    #[test]
+    fn coarse_tracking_kernel_matches_hand_computation() {
+        let mut cfg = EnvConfig {
+            recipe: crate::config::Recipe::Isaaclab,
+            ..EnvConfig::default()
+        };
+        cfg.terrain.preset = TerrainPreset::Flat;
+        cfg.rewards.track_lin_vel_xy_coarse_exp = Some(0.8);
+        cfg.reward_params.coarse_tracking_std = 1.2;
+        let spec = cfg.resolve("a1").unwrap();
+        let terrain = Terrain::generate(&spec.terrain).unwrap();
+        let task = Task::new(spec, a1_params()).unwrap();
+        let mut env = TaskEnvState::new();
+        let mut st = standing_state();
+        let mut rng = StdRng::seed_from_u64(1);
+        task.reset_env(&mut env, &st, [0.0; 3], &mut rng);
+        env.command = Command {
+            vx: 1.0,
+            vy: 0.0,
+            wz: 0.0,
+            time_left: 10.0,
+            ..Default::default()
+        };
+        let dt = 0.02;
+        // Standing at a 1 m/s command: error² 1 → 0.8 · dt · exp(−1/1.44); the sharp kernel
+        // (std 0.5) pays exp(−4).
+        st.base_lin_vel_w = [0.0, 0.0, 0.0];
+        let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
+        let coarse = r.terms[RewardTerm::TrackLinVelXyCoarseExp as usize];
+        assert!(
+            (coarse - 0.8 * dt * (-1.0f32 / 1.44).exp()).abs() < 1e-6,
+            "{coarse}"
+        );
+        let sharp = r.terms[RewardTerm::TrackLinVelXyExp as usize];
+        assert!((sharp - 1.5 * dt * (-4.0f32).exp()).abs() < 1e-6, "{sharp}");
+        // Moving at 0.4 m/s along a yawed heading: error 0.6 m/s.
+        st.base_quat = quat_from_yaw(1.0);
+        st.base_lin_vel_w = quat_rotate_inv_inverse(st.base_quat, [0.4, 0.0, 0.0]);
+        let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
+        let coarse = r.terms[RewardTerm::TrackLinVelXyCoarseExp as usize];
+        assert!(
+            (coarse - 0.8 * dt * (-0.36f32 / 1.44).exp()).abs() < 1e-6,
+            "{coarse}"
+        );
     }
 
     // rotate a base-frame vector into the world frame (test helper)

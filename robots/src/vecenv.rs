@@ -251,6 +251,7 @@ impl VecEnv {
             ..SimConfig::default()
         };
         let terrain = Terrain::generate(&task_spec.terrain)?;
+        let gains = task_spec.gains.apply(spec.training_gains);
         let task = Task::new(task_spec, params)?;
         let ground = (!terrain.is_flat()).then(|| terrain_blocks(&terrain, GROUND_BLOCK));
         let standing = model.standing_height(&spec.model_order_pose(&model, &spec.default_pose));
@@ -261,7 +262,7 @@ impl VecEnv {
             terrain,
             model,
             binding: RobotBinding::from_spec(spec),
-            actuator: Actuator::from_spec(spec, spec.training_gains),
+            actuator: Actuator::from_spec(spec, gains),
             sim_cfg,
             decimation,
             spawn_clearance: standing + 0.05,

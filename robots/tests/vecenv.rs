@@ -1,7 +1,7 @@
 //! The vectorised env: shapes, determinism-free sanity, resets, NaN actions, rough terrain.
 
 use l3p_robots::catalog::RobotSpec;
-use l3p_robots::config::{EnvConfig, TerrainPreset};
+use l3p_robots::config::{EnvConfig, GainsOverride, TerrainPreset};
 use l3p_robots::vecenv::VecEnv;
 
 fn cfg(preset: TerrainPreset) -> EnvConfig {
@@ -124,14 +124,8 @@ fn gait_meter_sees_standing_and_chatter_in_the_real_env() {
     assert!(chatter.mean_power > standing.mean_power);
 }
 
-/// Every catalog robot, holding its default pose (zero actions) under nominal conditions (the
-/// training task with the randomisation pinned at its nominal values), stands for 4 s: nobody
-/// terminates and the base stays near standing height. A target that falls or terminates at once
-/// learns nothing (issue 12 found ANYmal-B/D ending after one step and Spot falling); ANYmal sagged
-/// to 80-92% here with IsaacLab's simple-actuator gains (kp 40 / kd 5); legged_gym's kp 80 / kd 2,
-/// which the catalog uses, holds it at 92-97%.
-#[test]
-fn every_catalog_robot_stands_with_zero_actions_in_the_task() {
+/// The flat training task with the randomisation pinned at its nominal values.
+fn nominal_flat() -> EnvConfig {
     let mut nominal = cfg(TerrainPreset::Flat);
     let r = &mut nominal.randomization;
     r.static_friction = Some([0.8, 0.8]);
@@ -145,6 +139,61 @@ fn every_catalog_robot_stands_with_zero_actions_in_the_task() {
     r.kp_scale = Some([1.0, 1.0]);
     r.kd_scale = Some([1.0, 1.0]);
     r.latency_s = Some([0.0, 0.0]);
+    nominal
+}
+
+/// Mean base height (m) of `envs` robots after 2 s of zero actions.
+fn zero_action_height(spec: &RobotSpec, env_cfg: &EnvConfig) -> f32 {
+    let envs = 4;
+    let mut env = VecEnv::new(spec, env_cfg, envs, 2, 5).unwrap();
+    env.reset_all();
+    let actions = vec![0.0; envs * env.action_dim()];
+    for _ in 0..100 {
+        env.step(&actions).unwrap();
+    }
+    (0..envs)
+        .map(|e| env.robot_state(e).unwrap().base_pos[2])
+        .sum::<f32>()
+        / envs as f32
+}
+
+/// `[env.gains.a1]` reaches the simulated actuators: soft gains let the trunk sag under its weight,
+/// stiff ones hold it up, and a robot the table does not name keeps its catalog gains.
+#[test]
+fn per_robot_gains_reach_the_simulated_motors() {
+    let a1 = RobotSpec::by_name("a1").unwrap();
+    let go1 = RobotSpec::by_name("go1").unwrap();
+    let with_a1_kp = |kp: f32| {
+        let mut c = nominal_flat();
+        c.gains.insert(
+            "a1".into(),
+            GainsOverride {
+                kp: Some(kp),
+                kd: None,
+            },
+        );
+        c
+    };
+    let soft = zero_action_height(a1, &with_a1_kp(6.0));
+    let stiff = zero_action_height(a1, &with_a1_kp(120.0));
+    assert!(soft + 0.03 < stiff, "kp 6: {soft} m, kp 120: {stiff} m");
+    let go1_catalog = zero_action_height(go1, &nominal_flat());
+    let go1_beside = zero_action_height(go1, &with_a1_kp(6.0));
+    assert!(
+        (go1_catalog - go1_beside).abs() < 1e-4,
+        "{go1_catalog} {go1_beside}"
+    );
+}
+
+/// Every catalog robot, holding its default pose (zero actions) under nominal conditions (the
+/// training task with the randomisation pinned at its nominal values), stands for 4 s: nobody
+/// terminates and the base stays near standing height. A target that falls or terminates at once
+/// learns nothing (issue 12 found ANYmal-B/D ending after one step and Spot falling); ANYmal sagged
+/// to 80-92% here with IsaacLab's simple-actuator gains (kp 40 / kd 5); legged_gym's kp 80 / kd 2,
+/// which the catalog uses, holds it at 92-97%.
+#[test]
+fn every_catalog_robot_stands_with_zero_actions_in_the_task() {
+    let nominal = nominal_flat();
     let mut failures = Vec::new();
     for spec in RobotSpec::all() {
         let standing = spec.nominal_standing_height().unwrap();
