@@ -34,6 +34,9 @@ impl Config {
     /// hang or fail a process later is an error here, before anything starts.
     pub fn load(path: &Path) -> Result<Self, l3p_proto::config::ConfigError> {
         let config: Config = l3p_proto::config::load_toml(path)?;
+        // Robots added under the run's data directory (`l3p robots add`) are known to every
+        // process that reads this config, actors included.
+        crate::robots_cmd::load_added_robots(Some(&config.run.data_dir));
         config
             .validate()
             .map_err(|message| l3p_proto::config::ConfigError::Invalid {

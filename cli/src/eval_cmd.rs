@@ -196,6 +196,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         Some(path) => Config::load(path)?,
         None => Config::default(),
     };
+    crate::robots_cmd::load_added_robots(Some(&args.data_dir));
     let policy = load_policy(&args.policy, &args.data_dir)?;
     config.env.terrain.preset = match args.terrain.as_str() {
         "flat" => TerrainPreset::Flat,

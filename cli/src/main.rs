@@ -27,7 +27,7 @@ enum Command {
     Eval(l3p_cli::eval_cmd::EvalArgs),
     /// Draw a run's training curves (SVG) and print the convergence row.
     Report(l3p_cli::report_cmd::ReportArgs),
-    /// List the built-in robots or check a robot / URDF file (load, stand under PD).
+    /// List the robots, check one (load, stand under PD) or add your own from a URDF.
     Robots(l3p_cli::robots_cmd::RobotsArgs),
     /// Benchmarks: `bench sim` (simulator throughput), `bench learner` (PPO update throughput).
     Bench(l3p_cli::bench_cmd::BenchArgs),
@@ -50,6 +50,8 @@ fn main() -> anyhow::Result<()> {
     keep_large_allocations_on_the_heap();
     logging::init();
     let cli = Cli::parse();
+    // Robots added with `l3p robots add` ($L3P_ROBOTS_DIR, else ./l3p-data/robots).
+    l3p_cli::robots_cmd::load_added_robots(None);
     match cli.command {
         Command::Train(args) => l3p_cli::train_cmd::run(args),
         Command::Learner(args) => l3p_cli::learner_cmd::run(args),

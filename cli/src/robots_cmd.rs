@@ -1,7 +1,9 @@
-//! `l3p robots list|check`: the built-in robot catalog and a load-and-stand check of a robot or URDF
-//! file. Glue only; the work is in `l3p_robots::{catalog, urdf, bench}`.
+//! `l3p robots list|check|add`: the robots (the catalog and those added from a user's URDF), a
+//! load-and-stand check of a robot or URDF file, and `add`, which makes a quadruped URDF a robot
+//! (`<data-dir>/robots/<name>.toml` + the URDF beside it). Glue only; the work is in
+//! `l3p_robots::{catalog, added, urdf, bench}`.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
@@ -21,13 +23,26 @@ pub struct RobotsArgs {
 /// Robot subcommands.
 #[derive(Debug, Subcommand)]
 pub enum RobotsCommand {
-    /// List the built-in robots with mass, standing height, gains and limits.
-    List,
+    /// List the robots (built-in and added) with mass, standing height, gains and limits.
+    List {
+        /// Data directory whose `robots/` holds added robots.
+        #[arg(long, default_value = "l3p-data")]
+        data_dir: PathBuf,
+    },
+    /// Make a quadruped URDF a robot: infer its legs, feet, standing pose (checked in
+    /// simulation), PD gains and limits, print them for review and write
+    /// `<data-dir>/robots/<name>.toml` (edit it freely) with the URDF beside it. The robot then
+    /// trains, evaluates, deploys and exports by name like a built-in one.
+    Add(AddArgs),
     /// Load a robot (built-in name or URDF path), print its links, joints and mass, hold the default
     /// pose under PD for 2 s on flat ground and print the settled base height.
     Check {
-        /// Built-in robot name (a1, go1, go2, anymal_b, anymal_c, anymal_d, spot) or a .urdf path.
+        /// Robot name (built-in: a1, go1, go2, anymal_b, anymal_c, anymal_d, spot; or added) or a
+        /// .urdf path.
         robot: String,
+        /// Data directory whose `robots/` holds added robots.
+        #[arg(long, default_value = "l3p-data")]
+        data_dir: PathBuf,
         /// Seconds to hold the pose.
         #[arg(long, default_value_t = 2.0)]
         seconds: f32,
@@ -37,16 +52,153 @@ pub enum RobotsCommand {
     },
 }
 
+/// `l3p robots add` arguments: every inferred value can be overridden here or in the file.
+#[derive(Debug, Args)]
+pub struct AddArgs {
+    /// The robot's URDF file.
+    pub urdf: PathBuf,
+    /// Robot name (default: the URDF's robot name, lower-cased).
+    #[arg(long)]
+    pub name: Option<String>,
+    /// Data directory; the robot goes to `<data-dir>/robots/`.
+    #[arg(long, default_value = "l3p-data")]
+    pub data_dir: PathBuf,
+    /// PD stiffness (N·m/rad) instead of the inferred one.
+    #[arg(long)]
+    pub kp: Option<f32>,
+    /// PD damping (N·m·s/rad) instead of kp / 50.
+    #[arg(long)]
+    pub kd: Option<f32>,
+    /// Action scale instead of 0.25.
+    #[arg(long)]
+    pub action_scale: Option<f32>,
+    /// Effort limit (N·m) for leg joints whose URDF has none.
+    #[arg(long)]
+    pub effort: Option<f32>,
+    /// Velocity limit (rad/s) for leg joints whose URDF has none.
+    #[arg(long)]
+    pub velocity: Option<f32>,
+    /// Write the description even if the robot does not stand at the inferred pose and gains.
+    #[arg(long)]
+    pub force: bool,
+    /// Replace an added robot of the same name.
+    #[arg(long)]
+    pub replace: bool,
+}
+
 /// Runs a `robots` subcommand.
 pub fn run(args: RobotsArgs) -> anyhow::Result<()> {
     match args.command {
-        RobotsCommand::List => list(),
+        RobotsCommand::List { data_dir } => {
+            load_added_robots(Some(&data_dir));
+            list()
+        }
+        RobotsCommand::Add(add_args) => add(&add_args),
         RobotsCommand::Check {
             robot,
+            data_dir,
             seconds,
             training_gains,
-        } => check(&robot, seconds, training_gains),
+        } => {
+            load_added_robots(Some(&data_dir));
+            check(&robot, seconds, training_gains)
+        }
     }
+}
+
+/// Registers the robots added under `data_dir/robots` (or, for `None`, `$L3P_ROBOTS_DIR`, else
+/// `./l3p-data/robots`). A broken description is reported and skipped: it must not stop commands
+/// that do not use it (using it then fails with "unknown robot" naming the known ones).
+pub fn load_added_robots(data_dir: Option<&Path>) {
+    let dir = match data_dir {
+        Some(d) => d.join("robots"),
+        None => std::env::var_os(l3p_robots::added::ROBOTS_DIR_ENV)
+            .map(PathBuf::from)
+            .unwrap_or_else(|| PathBuf::from("l3p-data").join("robots")),
+    };
+    if let Err(e) = l3p_robots::added::load_dir(&dir) {
+        tracing::warn!("added robots in {}: {e}", dir.display());
+    }
+}
+
+fn add(args: &AddArgs) -> anyhow::Result<()> {
+    use l3p_robots::added::{Overrides, describe};
+    let model = l3p_robots::urdf::load_urdf_file(&args.urdf)?;
+    let overrides = Overrides {
+        name: args.name.clone(),
+        kp: args.kp,
+        kd: args.kd,
+        action_scale: args.action_scale,
+        effort: args.effort,
+        velocity: args.velocity,
+    };
+    let name = overrides
+        .name
+        .clone()
+        .unwrap_or_else(|| l3p_robots::added::sanitize_name(&model.name));
+    let dir = args.data_dir.join("robots");
+    let toml_path = dir.join(format!("{name}.toml"));
+    if toml_path.exists() && !args.replace {
+        anyhow::bail!(
+            "{} exists: robot `{name}` was added before\nhint: pass --replace, or --name for another name",
+            toml_path.display()
+        );
+    }
+    let urdf_file = format!("{name}.urdf");
+    let inferred = describe(&model, &urdf_file, &overrides, args.force)?;
+    let d = &inferred.description;
+    print!("{}", inferred.legs.summary());
+    println!("default pose (rad, canonical order; abduction, hip, knee per leg):");
+    for (l, leg) in ["FL", "FR", "RL", "RR"].iter().enumerate() {
+        println!(
+            "  {leg}  {:+.3}  {:+.3}  {:+.3}",
+            d.default_pose[3 * l],
+            d.default_pose[3 * l + 1],
+            d.default_pose[3 * l + 2]
+        );
+    }
+    println!(
+        "mass {:.2} kg; kp {:.1} N·m/rad, kd {:.2} N·m·s/rad; action scale {}; effort {:.1}–{:.1} N·m; velocity {:.1}–{:.1} rad/s",
+        d.mass,
+        d.kp,
+        d.kd,
+        d.action_scale,
+        d.effort_limit.iter().cloned().fold(f32::INFINITY, f32::min),
+        d.effort_limit.iter().cloned().fold(0.0, f32::max),
+        d.velocity_limit
+            .iter()
+            .cloned()
+            .fold(f32::INFINITY, f32::min),
+        d.velocity_limit.iter().cloned().fold(0.0, f32::max),
+    );
+    println!(
+        "penalised contacts: {}; episode ends on contact of: {}",
+        d.penalised_links.join(", "),
+        d.termination_links.join(", ")
+    );
+    println!(
+        "stands: kinematic height {:.3} m, settled {:.3} m ({:.0}%) after {} s, gravity z {:.3}",
+        inferred.standing_height,
+        inferred.settled_height,
+        100.0 * inferred.settled_height / inferred.standing_height.max(1e-6),
+        l3p_robots::added::STAND_CHECK_SECONDS,
+        inferred.settled_gravity_z
+    );
+    for n in &inferred.notes {
+        println!("note: {n}");
+    }
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let urdf_path = dir.join(&urdf_file);
+    std::fs::copy(&args.urdf, &urdf_path)
+        .with_context(|| format!("copying {} to {}", args.urdf.display(), urdf_path.display()))?;
+    l3p_policy::write_atomic(&toml_path, d.to_toml().as_bytes())
+        .with_context(|| format!("writing {}", toml_path.display()))?;
+    println!(
+        "wrote {} (and {}); train it with [[actors]] robot = \"{name}\"",
+        toml_path.display(),
+        urdf_path.display()
+    );
+    Ok(())
 }
 
 fn list() -> anyhow::Result<()> {
@@ -54,10 +206,11 @@ fn list() -> anyhow::Result<()> {
         "{:<9} {:<22} {:>8} {:>9} {:>6} {:>12} {:>14} {:>8}",
         "name", "robot", "mass kg", "stand m", "scale", "train kp/kd", "effort N·m", "vel r/s"
     );
-    for s in RobotSpec::all() {
+    let added = l3p_robots::added::all_added();
+    for s in RobotSpec::all().iter().chain(added.iter().copied()) {
         let m = s
             .model()
-            .with_context(|| format!("loading built-in {}", s.name))?;
+            .with_context(|| format!("loading robot {}", s.name))?;
         let h = m.standing_height(&s.model_order_pose(&m, &s.default_pose));
         println!(
             "{:<9} {:<22} {:>8.2} {:>9.3} {:>6.2} {:>12} {:>14} {:>8.1}",

@@ -38,6 +38,8 @@ pub enum Family {
     Anymal,
     /// Boston Dynamics Spot.
     Spot,
+    /// A robot added from the user's URDF (`crate::added`).
+    Other,
 }
 
 /// A built-in robot: URDF text and metadata.
@@ -293,7 +295,9 @@ static CATALOG: std::sync::OnceLock<Vec<RobotSpec>> = std::sync::OnceLock::new()
 
 /// Error for an unknown robot name.
 #[derive(Debug, thiserror::Error)]
-#[error("unknown robot `{name}`\nhint: built-in robots are {known}")]
+#[error(
+    "unknown robot `{name}`\nhint: known robots are {known} (add your own with `l3p robots add <file.urdf>`)"
+)]
 pub struct UnknownRobot {
     /// The requested name.
     pub name: String,
@@ -307,25 +311,33 @@ impl RobotSpec {
         CATALOG.get_or_init(build_all)
     }
 
-    /// Looks a robot up by short name (case-insensitive, `-` and `_` equivalent).
+    /// Looks a robot up by short name (case-insensitive, `-` and `_` equivalent): the catalog,
+    /// then the robots added in this process (`crate::added`).
     pub fn by_name(name: &str) -> Result<&'static RobotSpec, UnknownRobot> {
         let key = name.to_ascii_lowercase().replace('-', "_");
         Self::all()
             .iter()
             .find(|r| r.name == key)
+            .or_else(|| crate::added::find(&key))
             .ok_or_else(|| UnknownRobot {
                 name: name.to_string(),
                 known: Self::all()
                     .iter()
                     .map(|r| r.name)
+                    .chain(crate::added::all_added().iter().map(|r| r.name))
                     .collect::<Vec<_>>()
                     .join(", "),
             })
     }
 
-    /// Parses the embedded URDF.
+    /// Parses the robot's URDF (embedded, or the added robot's file as loaded).
     pub fn model(&self) -> Result<RobotModel, UrdfError> {
-        load_urdf_str(self.urdf, &format!("builtin:{}", self.name))
+        let origin = if self.family == Family::Other {
+            "robot"
+        } else {
+            "builtin"
+        };
+        load_urdf_str(self.urdf, &format!("{origin}:{}", self.name))
     }
 
     /// Base height over flat ground at the default pose with feet on the ground (forward kinematics of

@@ -26,12 +26,16 @@
 //!   walk criterion of `l3p eval` / `l3p bench walk`.
 //! - [`mirror::TaskMirror`]: the left-right observation and action maps of a robot's task, derived
 //!   from its geometry (PPO's symmetry loss).
+//! - [`added::describe`] → [`added::RobotDescription`] (a user's URDF as a robot: inferred legs,
+//!   standing pose, gains; the TOML of `l3p robots add`), [`added::register`] / [`added::load_dir`]
+//!   make it a [`catalog::RobotSpec`] that `RobotSpec::by_name` finds.
 //! - [`bench::run_sim_bench`], [`bench::stand_check`]: the work behind `l3p bench sim` and
 //!   `l3p robots check`.
 //!
 //! Architecture invariant: this crate knows nothing of burn, Zenoh or tokio.
 
 pub mod actuator;
+pub mod added;
 pub mod bench;
 pub mod catalog;
 pub mod config;

@@ -1,0 +1,819 @@
+//! Robots users add from their own URDF ("bring your own robot"): a [`RobotDescription`] is the
+//! TOML file `l3p robots add` writes for review and editing, [`describe`] infers one from a loaded
+//! model, and [`register`] / [`load_dir`] turn descriptions into [`RobotSpec`]s that
+//! [`RobotSpec::by_name`] finds beside the catalog, so an added robot trains, evaluates and deploys
+//! like a built-in one.
+//!
+//! What [`describe`] infers (every value is printed for review and can be edited in the file):
+//! - legs, joint order, feet and trunk from geometry ([`crate::infer::infer_quadruped`]);
+//! - the default pose: abduction 0; per leg the hip and knee angles that put the foot under the
+//!   hip with the leg at [`STANDING_EXTENSION`] of its reach, the knee bending to the side its
+//!   limits leave more room for (on a tie towards the body's middle, ANYmal's "X": front knees
+//!   backwards, rear knees forwards) — then checked by simulation: dropped on flat
+//!   ground and held with the inferred gains for 2 s, the robot must stay upright above
+//!   [`MIN_SETTLED_FRACTION`] of its kinematic standing height;
+//! - PD gains from the load: `kp` so that a quarter of the robot's weight on each foot deflects
+//!   the most loaded joint by [`STATIC_SAG_RAD`] (A1 → kp ≈ 60, the shipped A1 recipe's value),
+//!   at most the smallest effort limit over [`MIN_SATURATION_ERROR_RAD`]; `kd = kp / 50` (the
+//!   recipe's ratio);
+//! - effort and velocity limits from the URDF (a leg joint without them is an error naming it,
+//!   unless the caller fills them in), action scale [`DEFAULT_ACTION_SCALE`] (IsaacLab's Unitree
+//!   value), penalised contacts on thighs and shanks, termination on trunk contact.
+//!
+//! Joint positions stay in the file's convention: the canonical order is applied, the canonical
+//! axis signs are not (they are recorded as `axis_signs`). Every robot has its own encoder and
+//! decoder, so a transfer learns any sign convention; only zero-shot play of another robot's
+//! policy assumes the catalog's.
+//!
+//! The registry of added robots is process-wide and append-only: a [`RobotSpec`] holds `'static`
+//! strings, so a registered robot's strings are leaked once — a handful of small allocations per
+//! robot and process.
+
+use std::path::{Path, PathBuf};
+use std::sync::RwLock;
+
+use rapier3d::math::Vec3;
+use serde::{Deserialize, Serialize};
+
+use crate::bench::stand_check;
+use crate::catalog::{Family, Gains, NUM_JOINTS, RobotSpec};
+use crate::infer::{InferError, InferredLegs, LegId, infer_quadruped};
+use crate::model::{JointKind, RobotModel};
+use crate::sim::RobotBinding;
+use crate::task::MAX_PENALISED_BODIES;
+use crate::urdf::{UrdfError, load_urdf_str};
+
+/// Environment variable naming a directory of added robots every `l3p` process loads.
+pub const ROBOTS_DIR_ENV: &str = "L3P_ROBOTS_DIR";
+/// Foot depth below the hip as a fraction of the leg's reach in the inferred default pose (A1's
+/// catalog pose is at 0.73, Spot's at 0.73, ANYmal's at 0.92).
+pub const STANDING_EXTENSION: f32 = 0.75;
+/// Static deflection (rad) of the most loaded joint under a quarter of the weight per foot that
+/// sets the inferred `kp`.
+pub const STATIC_SAG_RAD: f32 = 0.08;
+/// The inferred `kp` reaches the smallest effort limit at this position error (rad) at the most.
+pub const MIN_SATURATION_ERROR_RAD: f32 = 0.25;
+/// Inferred `kd` is `kp` over this.
+pub const KP_OVER_KD: f32 = 50.0;
+/// Action scale of added robots (IsaacLab's Unitree robots).
+pub const DEFAULT_ACTION_SCALE: f32 = 0.25;
+/// Settled base height under the inferred gains, as a fraction of the kinematic standing height,
+/// below which the inferred pose does not count as standing.
+pub const MIN_SETTLED_FRACTION: f32 = 0.85;
+/// Seconds of the simulated standing check.
+pub const STAND_CHECK_SECONDS: f32 = 2.0;
+
+/// An added robot as its TOML file says (`<robots dir>/<name>.toml`, the URDF beside it).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RobotDescription {
+    /// Short name (`[a-z0-9_]+`, not a catalog robot's).
+    pub name: String,
+    /// Human-readable name.
+    pub display_name: String,
+    /// URDF file, relative to the description's directory.
+    pub urdf: String,
+    /// Actuated leg joints, canonical order (FL, FR, RL, RR × abduction, hip, knee).
+    pub joint_names: [String; NUM_JOINTS],
+    /// +1 where the file's joint axis follows the catalog's convention, −1 where it is reversed
+    /// (informational: positions stay in the file's convention).
+    pub axis_signs: [f32; NUM_JOINTS],
+    /// Default standing joint positions (rad), canonical order.
+    pub default_pose: [f32; NUM_JOINTS],
+    /// Trunk link (its ground contact ends an episode).
+    pub base_link: String,
+    /// Foot links, canonical leg order.
+    pub foot_links: [String; 4],
+    /// Links whose ground contact is penalised (at most 8).
+    pub penalised_links: Vec<String>,
+    /// Links whose ground contact ends an episode.
+    pub termination_links: Vec<String>,
+    /// PD stiffness for training (N·m/rad).
+    pub kp: f32,
+    /// PD damping for training (N·m·s/rad).
+    pub kd: f32,
+    /// Continuous torque limit per joint (N·m).
+    pub effort_limit: [f32; NUM_JOINTS],
+    /// No-load speed per joint (rad/s).
+    pub velocity_limit: [f32; NUM_JOINTS],
+    /// Action scale: `q* = default + scale · a`.
+    pub action_scale: f32,
+    /// Base height when spawning (m).
+    pub spawn_height: f32,
+    /// Total mass of the model (kg).
+    pub mass: f32,
+}
+
+/// What [`describe`] found besides the description: the leg structure and notes for review.
+#[derive(Debug, Clone)]
+pub struct Inference {
+    /// The description to write.
+    pub description: RobotDescription,
+    /// The inferred legs (for the review table).
+    pub legs: InferredLegs,
+    /// Kinematic standing height at the default pose (m).
+    pub standing_height: f32,
+    /// Settled base height of the simulated standing check (m).
+    pub settled_height: f32,
+    /// Base-frame gravity z after the standing check (−1 = level).
+    pub settled_gravity_z: f32,
+    /// Things a reviewer should know (loader repairs, filled-in limits).
+    pub notes: Vec<String>,
+}
+
+/// Caller-supplied values that replace inferred ones.
+#[derive(Debug, Clone, Default)]
+pub struct Overrides {
+    /// Name (default: the URDF's robot name, lower-cased, non-alphanumerics as `_`).
+    pub name: Option<String>,
+    /// PD stiffness.
+    pub kp: Option<f32>,
+    /// PD damping.
+    pub kd: Option<f32>,
+    /// Action scale.
+    pub action_scale: Option<f32>,
+    /// Effort limit (N·m) for leg joints whose URDF has none.
+    pub effort: Option<f32>,
+    /// Velocity limit (rad/s) for leg joints whose URDF has none.
+    pub velocity: Option<f32>,
+}
+
+/// Why a robot cannot be added or loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum AddError {
+    /// The URDF does not load.
+    #[error(transparent)]
+    Urdf(#[from] UrdfError),
+    /// Not a quadruped l3p can map.
+    #[error(transparent)]
+    Infer(#[from] InferError),
+    /// A leg joint without an effort or velocity limit.
+    #[error(
+        "joint `{joint}` has no {what} limit in the URDF\nhint: add <limit {what}=\"…\"/> to it, or pass --{what} for joints without one"
+    )]
+    MissingLimit {
+        /// Joint name.
+        joint: String,
+        /// `effort` or `velocity`.
+        what: &'static str,
+    },
+    /// A value out of range.
+    #[error("`{key}` = {value}: {why}")]
+    BadValue {
+        /// Key in the description.
+        key: String,
+        /// The value.
+        value: String,
+        /// What is wrong.
+        why: String,
+    },
+    /// No hip/knee angles put a foot under its hip.
+    #[error(
+        "no standing pose for leg {leg}: no hip angle within the joint limits puts the foot under the hip"
+    )]
+    NoStandingPose {
+        /// Leg (`FL`, …).
+        leg: String,
+    },
+    /// The simulated standing check failed.
+    #[error(
+        "`{name}` does not stand at the inferred pose and gains: base settled at {settled:.3} m of {standing:.3} m (gravity z {gravity_z:.2})\nhint: edit default_pose, kp or kd in the description (or pass --kp/--kd, or --force to write it anyway)"
+    )]
+    DoesNotStand {
+        /// Robot name.
+        name: String,
+        /// Settled base height (m).
+        settled: f32,
+        /// Kinematic standing height (m).
+        standing: f32,
+        /// Base-frame gravity z.
+        gravity_z: f32,
+    },
+    /// A name already taken by a catalog robot, or not `[a-z0-9_]+`.
+    #[error("robot name `{0}`: {1}")]
+    Name(String, String),
+    /// File I/O.
+    #[error("{path}: {source}")]
+    Io {
+        /// File.
+        path: PathBuf,
+        /// Cause.
+        source: std::io::Error,
+    },
+    /// A description that does not parse.
+    #[error("{path}: {message}")]
+    Toml {
+        /// File.
+        path: PathBuf,
+        /// Parser message.
+        message: String,
+    },
+    /// A simulation error during the standing check.
+    #[error("standing check: {0}")]
+    Sim(String),
+}
+
+/// Lower-cased name with every non-alphanumeric as `_` (`Unitree A1` → `unitree_a1`).
+pub fn sanitize_name(name: &str) -> String {
+    let s: String = name
+        .trim()
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() {
+                c.to_ascii_lowercase()
+            } else {
+                '_'
+            }
+        })
+        .collect();
+    s.trim_matches('_').to_string()
+}
+
+fn check_name(name: &str) -> Result<(), AddError> {
+    if name.is_empty()
+        || !name
+            .chars()
+            .all(|c| c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_')
+    {
+        return Err(AddError::Name(
+            name.into(),
+            "expected lower-case letters, digits and `_`".into(),
+        ));
+    }
+    if RobotSpec::all().iter().any(|r| r.name == name) {
+        return Err(AddError::Name(
+            name.into(),
+            "is a built-in robot; pass --name".into(),
+        ));
+    }
+    Ok(())
+}
+
+/// Infers a description of `model` (loaded from a file the description will call `urdf_file`),
+/// and checks by simulation that it stands (unless `force`).
+pub fn describe(
+    model: &RobotModel,
+    urdf_file: &str,
+    overrides: &Overrides,
+    force: bool,
+) -> Result<Inference, AddError> {
+    let legs = infer_quadruped(model)?;
+    // A file that only describes kinematics (Spot's SDK URDF: no inertia, no collision shapes)
+    // cannot be simulated: say which body lacks what.
+    let mut bodies = vec![legs.base_body];
+    bodies.extend(legs.joints().map(|j| j.body));
+    for b in bodies {
+        let body = &model.bodies[b];
+        let placeholder = format!("body `{}` has no mass in the file", body.name);
+        if model.warnings.iter().any(|w| w.starts_with(&placeholder)) {
+            return Err(bad(
+                "inertial",
+                &body.name,
+                "the body has no <inertial> mass in the URDF; l3p cannot simulate it (a kinematics-only file?)",
+            ));
+        }
+    }
+    for leg in &legs.legs {
+        if model.bodies[leg.foot_body].colliders.is_empty() {
+            return Err(bad(
+                "collision",
+                &leg.foot_link,
+                "the foot has no <collision> (or visual stand-in) shape; l3p cannot simulate its contacts",
+            ));
+        }
+    }
+    let name = overrides
+        .name
+        .clone()
+        .unwrap_or_else(|| sanitize_name(&model.name));
+    check_name(&name)?;
+    let mut notes = legs.warnings.clone();
+    let joints: Vec<_> = legs.joints().collect();
+    let joint_spec = |body: usize| model.bodies[body].joint.as_ref();
+    let mut effort_limit = [0.0; NUM_JOINTS];
+    let mut velocity_limit = [0.0; NUM_JOINTS];
+    for (k, j) in joints.iter().enumerate() {
+        let spec = joint_spec(j.body);
+        let limit = |v: Option<f32>, fill: Option<f32>, what: &'static str| match v
+            .filter(|x| *x > 0.0 && x.is_finite())
+        {
+            Some(x) => Ok(x),
+            None => fill.ok_or_else(|| AddError::MissingLimit {
+                joint: j.name.clone(),
+                what,
+            }),
+        };
+        effort_limit[k] = limit(spec.and_then(|s| s.effort), overrides.effort, "effort")?;
+        velocity_limit[k] = limit(
+            spec.and_then(|s| s.velocity),
+            overrides.velocity,
+            "velocity",
+        )?;
+    }
+    if overrides.effort.is_some() || overrides.velocity.is_some() {
+        notes.push("limits missing from the URDF were filled in from the command line".into());
+    }
+
+    // Rounded so that the file reads as written by hand (mrad, 0.1 N·m/rad, 0.01 N·m·s/rad).
+    let round = |v: f32, unit: f32| (v / unit).round() / (1.0 / unit).round();
+    let default_pose = standing_pose(model, &legs)?.map(|q| round(q, 1e-3));
+    let pose_model = pose_in_model_order(model, &legs, &default_pose);
+    let standing_height = model.standing_height(&pose_model);
+    let mass = model.total_mass();
+
+    let kp = match overrides.kp {
+        Some(kp) => kp,
+        None => {
+            let tau = static_stance_torque(model, &legs, &default_pose, mass);
+            let cap = effort_limit.iter().cloned().fold(f32::INFINITY, f32::min)
+                / MIN_SATURATION_ERROR_RAD;
+            (tau / STATIC_SAG_RAD).clamp(5.0, cap.max(5.0))
+        }
+    };
+    let kp = round(kp, 0.1);
+    let kd = overrides.kd.unwrap_or(round(kp / KP_OVER_KD, 0.01));
+
+    let mut penalised = Vec::new();
+    for leg in &legs.legs {
+        for j in &leg.joints[1..] {
+            let body = &model.bodies[j.body];
+            if let Some((link, _)) = body
+                .links
+                .iter()
+                .find(|(l, _)| *l != leg.foot_link && body.colliders.iter().any(|c| &c.link == l))
+                && penalised.len() < MAX_PENALISED_BODIES
+            {
+                penalised.push(link.clone());
+            }
+        }
+    }
+
+    let description = RobotDescription {
+        display_name: model.name.clone(),
+        urdf: urdf_file.to_string(),
+        joint_names: std::array::from_fn(|k| joints[k].name.clone()),
+        axis_signs: std::array::from_fn(|k| joints[k].sign),
+        default_pose,
+        base_link: legs.base_link.clone(),
+        foot_links: std::array::from_fn(|i| legs.legs[i].foot_link.clone()),
+        penalised_links: penalised,
+        termination_links: vec![legs.base_link.clone()],
+        kp,
+        kd,
+        effort_limit,
+        velocity_limit,
+        action_scale: overrides.action_scale.unwrap_or(DEFAULT_ACTION_SCALE),
+        spawn_height: round(standing_height + 0.02, 1e-3),
+        mass: round(mass, 1e-3),
+        name,
+    };
+    description.validate()?;
+    let spec = description.spec_with_model(model, leak(String::new()))?;
+    let report = stand_check(
+        model,
+        &RobotBinding::from_spec(&spec),
+        crate::actuator::Actuator::from_spec(&spec, spec.training_gains),
+        &spec.default_pose,
+        STAND_CHECK_SECONDS,
+    )
+    .map_err(|e| AddError::Sim(e.to_string()))?;
+    let stands = report.finite
+        && report.settled_height >= MIN_SETTLED_FRACTION * standing_height
+        && report.gravity_z < -0.95;
+    if !stands && !force {
+        return Err(AddError::DoesNotStand {
+            name: description.name.clone(),
+            settled: report.settled_height,
+            standing: standing_height,
+            gravity_z: report.gravity_z,
+        });
+    }
+    if !stands {
+        notes.push(format!(
+            "written with --force although it does not stand: settled at {:.3} m of {:.3} m",
+            report.settled_height, standing_height
+        ));
+    }
+    Ok(Inference {
+        description,
+        legs,
+        standing_height,
+        settled_height: report.settled_height,
+        settled_gravity_z: report.gravity_z,
+        notes,
+    })
+}
+
+/// Per-body joint positions for a canonical-order pose.
+fn per_body(model: &RobotModel, legs: &InferredLegs, pose: &[f32; NUM_JOINTS]) -> Vec<f32> {
+    let mut q = vec![0.0; model.bodies.len()];
+    for (k, j) in legs.joints().enumerate() {
+        q[j.body] = pose[k];
+    }
+    q
+}
+
+/// A canonical-order pose in `model.joint_names()` order (joints of no leg at 0).
+fn pose_in_model_order(
+    model: &RobotModel,
+    legs: &InferredLegs,
+    pose: &[f32; NUM_JOINTS],
+) -> Vec<f32> {
+    let names = legs.joint_names();
+    model
+        .joint_names()
+        .iter()
+        .map(|n| names.iter().position(|j| j == n).map_or(0.0, |k| pose[k]))
+        .collect()
+}
+
+/// Foot position in the trunk frame for per-body joint positions `q`.
+fn foot_position(model: &RobotModel, foot_link: &str, q: &[f32]) -> Vec3 {
+    let poses = model.body_poses(q);
+    match model.body_of_link(foot_link) {
+        Some((b, offset)) => (poses[b] * offset).translation,
+        None => Vec3::ZERO,
+    }
+}
+
+fn joint_limits(model: &RobotModel, body: usize) -> (f32, f32) {
+    let pi = std::f32::consts::PI;
+    match model.bodies[body].joint.as_ref().and_then(|j| j.limits) {
+        Some((lo, hi)) => (lo.max(-pi), hi.min(pi)),
+        None => (-pi, pi),
+    }
+}
+
+/// `(|dx|, hip angle, depth)` of the hip angle whose foot is closest to under the hip.
+type HipScan = (f32, f32, f32);
+
+/// Scans a leg's hip angles for the foot closest to under the hip (x of the leg's first joint).
+struct HipScanner<'a> {
+    model: &'a RobotModel,
+    foot_link: &'a str,
+    hip_body: usize,
+    hip_x: f32,
+    hip_z: f32,
+}
+
+impl HipScanner<'_> {
+    fn run(&self, q: &mut [f32], lo: f32, hi: f32, step: f32, best: &mut Option<HipScan>) {
+        let mut h = lo;
+        while h <= hi {
+            q[self.hip_body] = h;
+            let foot = foot_position(self.model, self.foot_link, q);
+            let dx = (foot.x - self.hip_x).abs();
+            if best.is_none_or(|b| dx < b.0) {
+                *best = Some((dx, h, self.hip_z - foot.z));
+            }
+            h += step;
+        }
+    }
+}
+
+/// The default pose search of the module doc, leg by leg.
+fn standing_pose(model: &RobotModel, legs: &InferredLegs) -> Result<[f32; NUM_JOINTS], AddError> {
+    const KNEE_STEP: f32 = 0.02;
+    const HIP_STEP: f32 = 0.02;
+    const HIP_FINE_STEP: f32 = 0.002;
+    let mut pose = [0.0; NUM_JOINTS];
+    for (l, leg) in legs.legs.iter().enumerate() {
+        let [abduction, hip, knee] = &leg.joints;
+        let (h_lo, h_hi) = joint_limits(model, hip.body);
+        let (k_lo, k_hi) = joint_limits(model, knee.body);
+        let hip_x = abduction.position.x;
+        // For each knee angle, the hip angle that puts the foot closest to under the hip (a
+        // coarse scan, then a fine one around its best).
+        let mut candidates = Vec::new();
+        let mut reach: f32 = 0.0;
+        let mut q = vec![0.0; model.bodies.len()];
+        let mut k = k_lo;
+        while k <= k_hi {
+            q[knee.body] = k;
+            let mut best: Option<HipScan> = None;
+            let scan = HipScanner {
+                model,
+                foot_link: &leg.foot_link,
+                hip_body: hip.body,
+                hip_x,
+                hip_z: hip.position.z,
+            };
+            scan.run(&mut q, h_lo, h_hi, HIP_STEP, &mut best);
+            if let Some((_, h, _)) = best {
+                let (lo, hi) = ((h - HIP_STEP).max(h_lo), (h + HIP_STEP).min(h_hi));
+                scan.run(&mut q, lo, hi, HIP_FINE_STEP, &mut best);
+            }
+            if let Some((dx, h, depth)) = best
+                && dx < 0.01
+                && depth > 0.0
+            {
+                reach = reach.max(depth);
+                candidates.push((k, h, depth));
+            }
+            k += KNEE_STEP;
+        }
+        // Bend the knee to the side with more room; on a tie (symmetric or no limits), towards
+        // the body's middle: front knees backwards, rear knees forwards (ANYmal's "X").
+        let room = k_hi + k_lo;
+        let rear = matches!(leg.id, LegId::RL | LegId::RR);
+        let bend_positive = if room.abs() < 1e-3 { rear } else { room > 0.0 };
+        let target = STANDING_EXTENSION * reach;
+        let pick = |positive: bool| {
+            candidates
+                .iter()
+                .filter(|(k, _, _)| if positive { *k > 0.2 } else { *k < -0.2 })
+                .min_by(|a, b| (a.2 - target).abs().total_cmp(&(b.2 - target).abs()))
+                .copied()
+        };
+        let (k, h, _) = pick(bend_positive)
+            .or_else(|| pick(!bend_positive))
+            .ok_or_else(|| AddError::NoStandingPose {
+                leg: leg.id.to_string(),
+            })?;
+        pose[3 * l] = 0.0;
+        pose[3 * l + 1] = h;
+        pose[3 * l + 2] = k;
+    }
+    Ok(pose)
+}
+
+/// Largest joint torque (N·m) when each foot carries a quarter of the weight at `pose`.
+fn static_stance_torque(
+    model: &RobotModel,
+    legs: &InferredLegs,
+    pose: &[f32; NUM_JOINTS],
+    mass: f32,
+) -> f32 {
+    let q = per_body(model, legs, pose);
+    let poses = model.body_poses(&q);
+    let force = Vec3::new(0.0, 0.0, mass * 9.81 / 4.0);
+    let mut worst: f32 = 0.0;
+    for leg in &legs.legs {
+        let foot = foot_position(model, &leg.foot_link, &q);
+        for j in &leg.joints {
+            let body = &model.bodies[j.body];
+            let (Some(parent), Some(spec)) = (body.parent, body.joint.as_ref()) else {
+                continue;
+            };
+            if spec.kind != JointKind::Revolute {
+                continue;
+            }
+            let frame = poses[parent] * spec.origin;
+            let axis = frame.rotation * spec.axis;
+            let tau = axis.cross(foot - frame.translation).dot(force);
+            worst = worst.max(tau.abs());
+        }
+    }
+    worst
+}
+
+fn bad(key: &str, value: impl std::fmt::Display, why: &str) -> AddError {
+    AddError::BadValue {
+        key: key.into(),
+        value: value.to_string(),
+        why: why.into(),
+    }
+}
+
+fn leak(s: String) -> &'static str {
+    Box::leak(s.into_boxed_str())
+}
+
+impl RobotDescription {
+    /// Checks every number and name list (not the names against a model: see [`Self::spec_with_model`]).
+    pub fn validate(&self) -> Result<(), AddError> {
+        check_name(&self.name)?;
+        let positive = |key: &str, v: f32| {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(bad(key, v, "expected a finite value > 0"))
+            }
+        };
+        positive("kp", self.kp)?;
+        positive("kd", self.kd)?;
+        positive("action_scale", self.action_scale)?;
+        positive("spawn_height", self.spawn_height)?;
+        positive("mass", self.mass)?;
+        for k in 0..NUM_JOINTS {
+            positive(&format!("effort_limit[{k}]"), self.effort_limit[k])?;
+            positive(&format!("velocity_limit[{k}]"), self.velocity_limit[k])?;
+            let q = self.default_pose[k];
+            if !q.is_finite() || q.abs() > 2.0 * std::f32::consts::PI {
+                return Err(bad(
+                    &format!("default_pose[{k}]"),
+                    q,
+                    "expected a finite angle within ±2π",
+                ));
+            }
+            if self.axis_signs[k] != 1.0 && self.axis_signs[k] != -1.0 {
+                return Err(bad(
+                    &format!("axis_signs[{k}]"),
+                    self.axis_signs[k],
+                    "expected 1 or -1",
+                ));
+            }
+        }
+        if self.penalised_links.len() > MAX_PENALISED_BODIES {
+            return Err(bad(
+                "penalised_links",
+                self.penalised_links.len(),
+                &format!("at most {MAX_PENALISED_BODIES} links"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// A [`RobotSpec`] for this description and its URDF text (leaked, see the module doc);
+    /// every joint and link it names must be in the model.
+    pub fn spec_with_model(
+        &self,
+        model: &RobotModel,
+        urdf: &'static str,
+    ) -> Result<RobotSpec, AddError> {
+        self.validate()?;
+        for (k, j) in self.joint_names.iter().enumerate() {
+            let ok = model
+                .body_of_joint(j)
+                .and_then(|b| model.bodies[b].joint.as_ref())
+                .is_some_and(|s| s.kind == JointKind::Revolute);
+            if !ok {
+                return Err(bad(
+                    &format!("joint_names[{k}]"),
+                    j,
+                    "no revolute joint of that name in the URDF",
+                ));
+            }
+        }
+        let links = [self.base_link.clone()]
+            .into_iter()
+            .chain(self.foot_links.iter().cloned())
+            .chain(self.penalised_links.iter().cloned())
+            .chain(self.termination_links.iter().cloned());
+        for l in links {
+            if model.body_of_link(&l).is_none() {
+                return Err(bad("links", &l, "no link of that name in the URDF"));
+            }
+        }
+        let strs = |v: &[String]| -> &'static [&'static str] {
+            Box::leak(
+                v.iter()
+                    .map(|s| leak(s.clone()))
+                    .collect::<Vec<_>>()
+                    .into_boxed_slice(),
+            )
+        };
+        Ok(RobotSpec {
+            name: leak(self.name.clone()),
+            display_name: leak(self.display_name.clone()),
+            family: Family::Other,
+            urdf,
+            joint_names: std::array::from_fn(|k| leak(self.joint_names[k].clone())),
+            default_pose: self.default_pose,
+            base_link: leak(self.base_link.clone()),
+            foot_links: std::array::from_fn(|i| leak(self.foot_links[i].clone())),
+            penalised_links: strs(&self.penalised_links),
+            termination_links: strs(&self.termination_links),
+            training_gains: Gains {
+                kp: self.kp,
+                kd: self.kd,
+            },
+            stand_gains: Gains {
+                kp: 3.0 * self.kp,
+                kd: 3.0 * self.kd,
+            },
+            effort_limit: self.effort_limit,
+            saturation_effort: self.effort_limit,
+            velocity_limit: self.velocity_limit,
+            action_scale: self.action_scale,
+            spawn_height: self.spawn_height,
+            published_mass: self.mass,
+        })
+    }
+
+    /// The file `l3p robots add` writes: a header saying where each value came from, then the
+    /// TOML.
+    pub fn to_toml(&self) -> String {
+        // toml writes an f32 as the f64 it widens to (0.83 → 0.8300000429153442): write each
+        // float as the shortest decimal that reads back as the same f32.
+        fn shortest(v: &mut toml::Value) {
+            match v {
+                toml::Value::Float(f) => {
+                    *f = (*f as f32).to_string().parse().unwrap_or(*f);
+                }
+                toml::Value::Array(a) => a.iter_mut().for_each(shortest),
+                toml::Value::Table(t) => t.iter_mut().for_each(|(_, v)| shortest(v)),
+                _ => {}
+            }
+        }
+        let body = match toml::Value::try_from(self) {
+            Ok(mut value) => {
+                shortest(&mut value);
+                toml::to_string(&value).unwrap_or_default()
+            }
+            Err(_) => String::new(),
+        };
+        format!(
+            "# An l3p robot description (`l3p robots add`); edit any value and run `l3p robots check {}`.\n\
+             # Inferred: joint order, feet and trunk from geometry; default_pose (foot under hip at {:.0}% of\n\
+             # the leg's reach, checked standing in simulation); kp from the stance load ({} rad of\n\
+             # sag), kd = kp / {}; limits from the URDF. axis_signs are informational: joint positions\n\
+             # use the file's axes.\n{body}",
+            self.name,
+            100.0 * STANDING_EXTENSION,
+            STATIC_SAG_RAD,
+            KP_OVER_KD,
+        )
+    }
+
+    /// Reads a description file and its URDF (relative to the file's directory).
+    pub fn load(path: &Path) -> Result<(RobotDescription, String), AddError> {
+        let text = std::fs::read_to_string(path).map_err(|source| AddError::Io {
+            path: path.into(),
+            source,
+        })?;
+        let desc: RobotDescription = toml::from_str(&text).map_err(|e| AddError::Toml {
+            path: path.into(),
+            message: e.to_string(),
+        })?;
+        let urdf_path = path.parent().unwrap_or(Path::new(".")).join(&desc.urdf);
+        let urdf = std::fs::read_to_string(&urdf_path).map_err(|source| AddError::Io {
+            path: urdf_path,
+            source,
+        })?;
+        Ok((desc, urdf))
+    }
+}
+
+/// Registered robots with the description each came from.
+static ADDED: RwLock<Vec<(RobotDescription, &'static RobotSpec)>> = RwLock::new(Vec::new());
+
+/// Registers a description (with its URDF text) so that [`RobotSpec::by_name`] finds it. The same
+/// description and URDF registered again returns the earlier spec; a different one under the same
+/// name replaces it for later lookups.
+pub fn register(desc: &RobotDescription, urdf: String) -> Result<&'static RobotSpec, AddError> {
+    {
+        let added = ADDED.read().unwrap_or_else(|e| e.into_inner());
+        if let Some((_, found)) = added
+            .iter()
+            .find(|(d, s)| d == desc && s.urdf == urdf.as_str())
+        {
+            return Ok(found);
+        }
+    }
+    let model = load_urdf_str(&urdf, &format!("robot:{}", desc.name))?;
+    let spec: &'static RobotSpec = Box::leak(Box::new(desc.spec_with_model(&model, leak(urdf))?));
+    let mut added = ADDED.write().unwrap_or_else(|e| e.into_inner());
+    added.retain(|(_, s)| s.name != spec.name);
+    added.push((desc.clone(), spec));
+    Ok(spec)
+}
+
+/// An added robot by its (normalised) name.
+pub fn find(name: &str) -> Option<&'static RobotSpec> {
+    ADDED
+        .read()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+        .find(|(_, s)| s.name == name)
+        .map(|(_, s)| *s)
+}
+
+/// Every added robot registered in this process.
+pub fn all_added() -> Vec<&'static RobotSpec> {
+    ADDED
+        .read()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+        .map(|(_, s)| *s)
+        .collect()
+}
+
+/// Registers every `*.toml` description in `dir` (a missing directory is empty); the first bad
+/// file is an error naming it.
+pub fn load_dir(dir: &Path) -> Result<Vec<&'static RobotSpec>, AddError> {
+    let entries = match std::fs::read_dir(dir) {
+        Ok(e) => e,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(source) => {
+            return Err(AddError::Io {
+                path: dir.into(),
+                source,
+            });
+        }
+    };
+    let mut paths: Vec<PathBuf> = entries
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    paths.sort();
+    let mut out = Vec::new();
+    for p in paths {
+        let (desc, urdf) = RobotDescription::load(&p)?;
+        out.push(register(&desc, urdf).map_err(|e| AddError::Toml {
+            path: p.clone(),
+            message: e.to_string(),
+        })?);
+    }
+    Ok(out)
+}
