@@ -17,3 +17,4 @@ pub mod report_cmd;
 pub mod robots_cmd;
 pub mod runtime;
 pub mod train_cmd;
+pub mod transfer_cmd;

@@ -17,6 +17,8 @@ struct Cli {
 enum Command {
     /// Train locally: registry, learner and actors on loopback Zenoh, data under ./l3p-data/<run>/.
     Train(l3p_cli::train_cmd::TrainArgs),
+    /// Fine-tune a pretrained policy on another robot: L3P's core frozen, the robot's adapters train.
+    Transfer(l3p_cli::transfer_cmd::TransferArgs),
     /// Run the learner daemon (PPO over Zenoh).
     Learner(l3p_cli::learner_cmd::LearnerArgs),
     /// Run a rollout actor daemon for one robot.
@@ -54,6 +56,7 @@ fn main() -> anyhow::Result<()> {
     l3p_cli::robots_cmd::load_added_robots(None);
     match cli.command {
         Command::Train(args) => l3p_cli::train_cmd::run(args),
+        Command::Transfer(args) => l3p_cli::transfer_cmd::run(args),
         Command::Learner(args) => l3p_cli::learner_cmd::run(args),
         Command::Actor(args) => l3p_cli::actor_cmd::run(args),
         Command::Metrics(args) => l3p_cli::metrics_cmd::run(args),

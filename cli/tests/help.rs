@@ -13,8 +13,9 @@ fn l3p(args: &[&str]) -> (bool, String) {
     )
 }
 
-const COMMANDS: [&str; 14] = [
+const COMMANDS: [&str; 15] = [
     "train",
+    "transfer",
     "learner",
     "actor",
     "metrics",

@@ -1,9 +1,13 @@
 //! `l3p robots add` through the binary: a user's URDF becomes a robot file that `robots list`,
 //! `robots check` and a training config know by name; adding it twice needs `--replace`; a file
-//! that is not a quadruped is a clear error.
+//! that is not a quadruped is a clear error. `l3p transfer` fine-tunes a registry checkpoint on
+//! it with the core frozen, and the registry records where the new policy came from.
 
 use std::path::Path;
 use std::process::Command;
+
+mod common;
+use common::TINY_FLAT_TASK;
 
 fn l3p(args: &[&str], cwd: &Path) -> (bool, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_l3p"))
@@ -86,4 +90,78 @@ fn an_added_urdf_is_listed_checked_and_trainable_by_name() {
     assert!(!ok && !out.contains("panicked"), "{out}");
     assert!(!dir.join("l3p-data/robots/stick.toml").exists());
     std::fs::remove_dir_all(&dir).unwrap();
+}
+
+#[test]
+fn transfer_fine_tunes_a_registry_checkpoint_on_an_added_robot_with_lineage() {
+    let dir = tempfile::tempdir().unwrap();
+    let cwd = dir.path();
+    let urdf = l3p_robots::catalog::RobotSpec::by_name("go1")
+        .unwrap()
+        .urdf
+        .replacen("name=\"go1\"", "name=\"field_dog\"", 1);
+    std::fs::write(cwd.join("field_dog.urdf"), urdf).unwrap();
+    let (ok, out) = l3p(&["robots", "add", "field_dog.urdf"], cwd);
+    assert!(ok, "{out}");
+    // Pretrain a (tiny) A1 policy; its checkpoint goes to the registry under l3p-data.
+    let base = format!("[run]\nname = \"pre\"\n{TINY_FLAT_TASK}")
+        + "[learner]\nmax_iterations = 2\n[rollout]\nsteps_per_env = 8\n[[actors]]\nrobot = \"a1\"\nenvs = 4\nthreads = 1\n";
+    std::fs::write(cwd.join("base.toml"), base).unwrap();
+    let (ok, out) = l3p(&["train", "base.toml", "--quiet"], cwd);
+    assert!(ok, "{out}");
+    let (ok, out) = l3p(
+        &[
+            "transfer",
+            "--robot",
+            "field_dog",
+            "--from",
+            "pre-checkpoint@latest",
+            "--config",
+            "base.toml",
+            "--iterations",
+            "2",
+            "--quiet",
+        ],
+        cwd,
+    );
+    assert!(ok, "{out}");
+    assert!(
+        out.contains("l3p-transfer") && out.contains("stopped at iteration 2"),
+        "{out}"
+    );
+    let written =
+        std::fs::read_to_string(cwd.join("l3p-data/field_dog-transfer/transfer.toml")).unwrap();
+    assert!(
+        written.contains("mode = \"l3p-transfer\"") && written.contains("robot = \"field_dog\""),
+        "{written}"
+    );
+    let (ok, out) = l3p(
+        &[
+            "registry",
+            "lineage",
+            "field_dog-transfer-field_dog@latest",
+            "--data",
+            "l3p-data",
+        ],
+        cwd,
+    );
+    assert!(ok, "{out}");
+    assert!(
+        out.contains("--from_checkpoint--> pre-checkpoint@"),
+        "{out}"
+    );
+    // A deploy artifact is not a checkpoint to start from.
+    let (ok, out) = l3p(
+        &[
+            "transfer",
+            "--robot",
+            "go1",
+            "--from",
+            "pre-a1@latest",
+            "--config",
+            "base.toml",
+        ],
+        cwd,
+    );
+    assert!(!ok && out.contains("checkpoint"), "{out}");
 }

@@ -52,6 +52,9 @@ pub struct DaemonConfig {
     pub max_iterations: u64,
     /// Checkpoint to initialise from in the transfer modes.
     pub init_from: Option<PathBuf>,
+    /// Registry reference (`name@version`) of `init_from`, when it came from the registry: the
+    /// run's registry checkpoints name it as lineage (`from_checkpoint`).
+    pub init_from_artifact: Option<String>,
 }
 
 impl Default for DaemonConfig {
@@ -64,6 +67,7 @@ impl Default for DaemonConfig {
             registry_checkpoint_every: 100,
             max_iterations: 1500,
             init_from: None,
+            init_from_artifact: None,
         }
     }
 }
@@ -270,7 +274,7 @@ fn save_checkpoint(
     registry: Option<&RegistryUploader>,
     record: &MetricsRecord,
 ) -> Result<(), DaemonError> {
-    use l3p_registry::{ArtifactKind, PutRequest};
+    use l3p_registry::{ArtifactKind, LineageRole, PutRequest};
     let bytes = ppo.checkpoint_bytes()?;
     let path = checkpoint_path(&opts.run_dir);
     l3p_policy::write_atomic(&path, &bytes).map_err(|source| DaemonError::Io { path, source })?;
@@ -292,11 +296,14 @@ fn save_checkpoint(
             .producer(&format!("learner/{}", opts.run))
             .config(serde_json::json!({ "mode": opts.ppo.mode.as_str(), "policy": opts.policy }))
     };
-    let checkpoint = summary(PutRequest::new(
+    let mut checkpoint = summary(PutRequest::new(
         &checkpoint_artifact(&opts.run),
         ArtifactKind::Checkpoint,
         bytes,
     ));
+    if let Some(source) = &opts.daemon.init_from_artifact {
+        checkpoint = checkpoint.lineage(LineageRole::FromCheckpoint, source);
+    }
     let mut deploys = Vec::with_capacity(opts.robots.len());
     for spec in &opts.robots {
         let (export, config) = ppo.export(&spec.name)?;
