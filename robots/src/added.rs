@@ -514,9 +514,14 @@ fn standing_pose(model: &RobotModel, legs: &InferredLegs) -> Result<[f32; NUM_JO
         }
         // Bend the knee to the side with more room; on a tie (symmetric or no limits), towards
         // the body's middle: front knees backwards, rear knees forwards (ANYmal's "X").
+        // "Backwards" is a negative canonical knee angle; the file's angle is `sign` times it.
         let room = k_hi + k_lo;
         let rear = matches!(leg.id, LegId::RL | LegId::RR);
-        let bend_positive = if room.abs() < 1e-3 { rear } else { room > 0.0 };
+        let bend_positive = if room.abs() < 1e-3 {
+            rear == (knee.sign > 0.0)
+        } else {
+            room > 0.0
+        };
         let target = STANDING_EXTENSION * reach;
         let pick = |positive: bool| {
             candidates
