@@ -131,6 +131,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if let Some(envs) = args.envs {
         config.actors.iter_mut().for_each(|a| a.envs = envs);
     }
+    if args.until_walks {
+        // A walk check plays the latest checkpoint: write one at least as often as the checks
+        // come, or a check re-evaluates an old policy.
+        let every = args.eval_every.max(1);
+        config.learner.checkpoint_every = config.learner.checkpoint_every.clamp(1, every);
+    }
     l3p_proto::keys::validate_segment("run", &config.run.name)?;
     let opts = learner_cmd::learner_options(&config, true)?;
     let run_dir = opts.run_dir.clone();

@@ -225,7 +225,6 @@ fn until_walks_records_every_walk_check() {
             + r#"
 [learner]
 max_iterations = 4
-checkpoint_every = 1
 [rollout]
 steps_per_env = 8
 [[actors]]
@@ -234,6 +233,8 @@ envs = 4
 "#,
     )
     .unwrap();
+    // checkpoint_every stays at its default (25): --until-walks checkpoints as often as it checks,
+    // so the first check plays the policy of iteration 2, not an older one.
     let data = dir.path().join("data");
     let out = l3p(&[
         "train",
@@ -262,6 +263,7 @@ envs = 4
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
     assert!(!checks.is_empty(), "no walk check recorded");
+    assert_eq!(checks[0]["iteration"], 2, "{:?}", checks[0]["iteration"]);
     for c in &checks {
         let rows = c["rows"].as_array().unwrap();
         assert_eq!(rows.len(), 2, "{c}");
