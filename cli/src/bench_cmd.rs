@@ -161,9 +161,11 @@ fn bench_train_in(a: &TrainBenchArgs, scratch: &std::path::Path) -> anyhow::Resu
         iterations: Some(a.iterations),
         envs: None,
         data_dir: Some(scratch.to_path_buf()),
-        quiet: true,
-        until_walks: false,
-        eval_every: 25,
+        flags: crate::train_cmd::TrainingFlags {
+            quiet: true,
+            until_walks: false,
+            eval_every: 25,
+        },
     })?;
     let text = std::fs::read_to_string(l3p_learner::daemon::metrics_path(&scratch.join("bench")))?;
     let records: Vec<l3p_proto::MetricsRecord> = text

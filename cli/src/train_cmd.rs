@@ -32,6 +32,13 @@ pub struct TrainArgs {
     /// Override the data directory ([run] data_dir).
     #[arg(long)]
     pub data_dir: Option<PathBuf>,
+    #[command(flatten)]
+    pub flags: TrainingFlags,
+}
+
+/// How a training run reports and when it stops early: shared by `l3p train` and `l3p transfer`.
+#[derive(Debug, Clone, Args)]
+pub struct TrainingFlags {
     /// No progress bar (log lines instead).
     #[arg(long)]
     pub quiet: bool,
@@ -131,10 +138,10 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if let Some(envs) = args.envs {
         config.actors.iter_mut().for_each(|a| a.envs = envs);
     }
-    if args.until_walks {
+    if args.flags.until_walks {
         // A walk check plays the latest checkpoint: write one at least as often as the checks
         // come, or a check re-evaluates an old policy.
-        let every = args.eval_every.max(1);
+        let every = args.flags.eval_every.max(1);
         config.learner.checkpoint_every = config.learner.checkpoint_every.clamp(1, every);
     }
     l3p_proto::keys::validate_segment("run", &config.run.name)?;
@@ -199,7 +206,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         let (progress_tx, mut progress_rx) = tokio::sync::mpsc::unbounded_channel();
         let learner = tokio::spawn(daemon::run(session.clone(), opts, cancel.clone(), Some(progress_tx)));
 
-        let bar = if args.quiet {
+        let bar = if args.flags.quiet {
             ProgressBar::hidden()
         } else {
             let bar = ProgressBar::new(config.learner.max_iterations.max(1));
@@ -245,15 +252,15 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                             v("terrain_level"), v("lin_vel_error"),
                         );
                         bar.set_position(r.iteration);
-                        if args.until_walks
+                        if args.flags.until_walks
                             && walk_task.is_none()
-                            && r.iteration >= last_walk_eval + args.eval_every.max(1)
+                            && r.iteration >= last_walk_eval + args.flags.eval_every.max(1)
                         {
                             last_walk_eval = r.iteration;
                             let (cfg, dir) = (config.clone(), run_dir.clone());
                             walk_task = Some(tokio::task::spawn_blocking(move || walk_check(&cfg, &dir)));
                         }
-                        if args.quiet { info!(iteration = r.iteration, "{msg}"); } else { bar.set_message(msg); }
+                        if args.flags.quiet { info!(iteration = r.iteration, "{msg}"); } else { bar.set_message(msg); }
                     }
                 },
                 _ = watchdog.tick() => {
@@ -291,7 +298,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                 Err(e) => warn!("walk check panicked: {e}"),
             }
         }
-        if args.until_walks {
+        if args.flags.until_walks {
             report_walk(&run_dir, walked.as_ref(), samples_per_iteration)?;
         }
         for actor in &mut actors {

@@ -15,7 +15,7 @@ use l3p_policy::Arch;
 use l3p_registry::ArtifactKind;
 
 use crate::config::{ActorSpec, Config};
-use crate::train_cmd::{self, TrainArgs};
+use crate::train_cmd::{self, TrainArgs, TrainingFlags};
 
 /// `l3p transfer` arguments.
 #[derive(Debug, Args)]
@@ -42,15 +42,8 @@ pub struct TransferArgs {
     /// Data directory (default: the base config's).
     #[arg(long)]
     pub data_dir: Option<PathBuf>,
-    /// No progress bar (log lines instead).
-    #[arg(long)]
-    pub quiet: bool,
-    /// Stop when the walk criterion holds (as `l3p train --until-walks`).
-    #[arg(long)]
-    pub until_walks: bool,
-    /// Iterations between walk evaluations (with --until-walks).
-    #[arg(long, default_value_t = 25)]
-    pub eval_every: u64,
+    #[command(flatten)]
+    pub flags: TrainingFlags,
 }
 
 /// Builds the fine-tuning config, writes it to `<data_dir>/<run>/transfer.toml` and trains it.
@@ -121,9 +114,7 @@ pub fn run(args: TransferArgs) -> anyhow::Result<()> {
         iterations: None,
         envs: None,
         data_dir: None,
-        quiet: args.quiet,
-        until_walks: args.until_walks,
-        eval_every: args.eval_every,
+        flags: args.flags,
     })
 }
 
