@@ -122,6 +122,19 @@ impl PhysicsPins {
     }
 }
 
+/// `--terrain`'s names.
+pub fn terrain_preset(name: &str) -> anyhow::Result<TerrainPreset> {
+    Ok(match name {
+        "flat" => TerrainPreset::Flat,
+        "simple-rough" => TerrainPreset::SimpleRough,
+        "curriculum" => TerrainPreset::Curriculum,
+        "paper" => TerrainPreset::Paper,
+        other => {
+            anyhow::bail!("unknown terrain {other}\nhint: flat, simple-rough, curriculum or paper")
+        }
+    })
+}
+
 /// Load a deployable policy from a path or from the local registry.
 pub fn load_policy(reference: &str, data_dir: &Path) -> anyhow::Result<DeployPolicy> {
     let path = Path::new(reference);
@@ -159,8 +172,9 @@ pub fn constant_forward_command(env: &mut l3p_robots::config::EnvConfig, v: f32)
     env.commands.rel_standing_envs = 0.0;
 }
 
-/// Plays `policy` on `robot` with `env` and applies the walk criterion; the action filter is the
-/// policy's own unless `action_filter_alpha` overrides it.
+/// Plays `policy` on `robot` with `env` and applies the walk criterion; the observation contract,
+/// action filter and (on the policy's own robot) PD gains are the policy's, the action filter
+/// unless `action_filter_alpha` overrides it.
 #[allow(clippy::too_many_arguments)]
 pub fn evaluate_row(
     robot: &l3p_robots::catalog::RobotSpec,
@@ -173,7 +187,7 @@ pub fn evaluate_row(
     action_filter_alpha: Option<f32>,
 ) -> anyhow::Result<EvalRow> {
     // The policy's own observation and action contract, whatever the config says.
-    let mut env = l3p_deploy::io::env_for_policy(env, policy.obs_dim(), policy.config.io.as_ref());
+    let mut env = l3p_deploy::io::sim_env_for_policy(env, &policy.config, robot.name);
     if let Some(alpha) = action_filter_alpha {
         env.action_filter_alpha = alpha;
     }
@@ -198,15 +212,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     };
     crate::robots_cmd::load_added_robots(Some(&args.data_dir));
     let policy = load_policy(&args.policy, &args.data_dir)?;
-    config.env.terrain.preset = match args.terrain.as_str() {
-        "flat" => TerrainPreset::Flat,
-        "simple-rough" => TerrainPreset::SimpleRough,
-        "curriculum" => TerrainPreset::Curriculum,
-        "paper" => TerrainPreset::Paper,
-        other => {
-            anyhow::bail!("unknown terrain {other}\nhint: flat, simple-rough, curriculum or paper")
-        }
-    };
+    config.env.terrain.preset = terrain_preset(&args.terrain)?;
     // A blind policy runs without the height scan (evaluate_row applies the whole contract).
     config.env =
         l3p_deploy::io::env_for_policy(&config.env, policy.obs_dim(), policy.config.io.as_ref());

@@ -523,10 +523,14 @@ fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
             if lines.is_empty() {
                 continue;
             }
-            let file = out.join(format!("{robot}-{key}.svg"));
+            let title = format!("{robot} — {label}");
             std::fs::write(
-                &file,
-                l3p_learner::report::svg_bands(&format!("{robot} — {label}"), label, &lines),
+                out.join(format!("{robot}-{key}.svg")),
+                l3p_learner::report::svg_bands(&title, label, &lines),
+            )?;
+            std::fs::write(
+                out.join(format!("{robot}-{key}.png")),
+                l3p_learner::report::png_bands(&title, label, &lines),
             )?;
             md.push_str(&format!("\n![{robot} {label}]({robot}-{key}.svg)\n"));
         }

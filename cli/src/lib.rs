@@ -12,6 +12,9 @@ pub mod experiment;
 pub mod experiment_cmd;
 pub mod learner_cmd;
 pub mod metrics_cmd;
+pub mod play_cmd;
+#[cfg(feature = "rerun")]
+mod play_rerun;
 pub mod registry_cmd;
 pub mod report_cmd;
 pub mod robots_cmd;

@@ -27,6 +27,8 @@ enum Command {
     Metrics(l3p_cli::metrics_cmd::MetricsArgs),
     /// Play a policy without learning and print tracking errors, reward and falls.
     Eval(l3p_cli::eval_cmd::EvalArgs),
+    /// Watch a policy: simulate it and log to Rerun (--save run.rrd, --connect, --spawn).
+    Play(l3p_cli::play_cmd::PlayArgs),
     /// Draw a run's training curves (SVG) and print the convergence row.
     Report(l3p_cli::report_cmd::ReportArgs),
     /// List the robots, check one (load, stand under PD) or add your own from a URDF.
@@ -45,6 +47,7 @@ enum Command {
     Export(l3p_cli::deploy_cmd::ExportArgs),
     /// Check a TOML config file: parse it strictly and print the resolved values.
     Config(l3p_cli::config_cmd::ConfigArgs),
+    /// The paper's transfer experiment: plan, run (resumably), status, report.
     Experiment(l3p_cli::experiment_cmd::ExperimentArgs),
 }
 
@@ -61,6 +64,7 @@ fn main() -> anyhow::Result<()> {
         Command::Actor(args) => l3p_cli::actor_cmd::run(args),
         Command::Metrics(args) => l3p_cli::metrics_cmd::run(args),
         Command::Eval(args) => l3p_cli::eval_cmd::run(args),
+        Command::Play(args) => l3p_cli::play_cmd::run(args),
         Command::Report(args) => l3p_cli::report_cmd::run(args),
         Command::Config(args) => l3p_cli::config_cmd::run(args),
         Command::Registry(args) => l3p_cli::registry_cmd::run(args),

@@ -1,74 +1,120 @@
-//! `l3p report <run>`: training curves as SVG under the run directory and the paper-style row.
+//! `l3p report <run> [<run>…]`: training curves as SVG and PNG (one run under its directory, several
+//! overlaid) and the paper-style row per run.
 
 use std::path::PathBuf;
 
 use clap::Args;
 use l3p_learner::daemon::metrics_path;
-use l3p_learner::report::{ReportRow, load_learner_records, series, smooth, svg_chart};
+use l3p_learner::report::{
+    ReportRow, load_learner_records, png_bands, png_chart, series, smooth, svg_bands, svg_chart,
+};
 
 #[derive(Debug, Args)]
 pub struct ReportArgs {
-    /// Run name.
-    pub run: String,
-    /// Data directory holding the run.
+    /// Run name; several runs are overlaid (one line each) in one set of charts.
+    #[arg(required = true, num_args = 1..)]
+    pub runs: Vec<String>,
+    /// Data directory holding the runs.
     #[arg(long, default_value = "l3p-data")]
     pub data_dir: PathBuf,
     /// Moving-average window (iterations) for smoothing and convergence.
     #[arg(long, default_value_t = 10)]
     pub window: usize,
+    /// Where the charts go (default: `<data_dir>/<run>/report/`, or
+    /// `<data_dir>/reports/<run>_vs_<run>…/` for several runs).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
 }
 
+/// The charted metrics: key and axis label.
+const CHARTS: [(&str, &str); 5] = [
+    ("episode_return", "episode reward"),
+    ("terrain_level", "terrain level"),
+    ("lin_vel_error", "xy-velocity tracking error (m/s)"),
+    ("yaw_rate_error", "yaw-rate tracking error (rad/s)"),
+    ("episode_length", "episode length (steps)"),
+];
+
 pub fn run(args: ReportArgs) -> anyhow::Result<()> {
-    l3p_proto::keys::validate_segment("run", &args.run)?;
-    let run_dir = args.data_dir.join(&args.run);
-    let path = metrics_path(&run_dir);
-    let records = load_learner_records(&path)
-        .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
-    if records.is_empty() {
-        anyhow::bail!("{} holds no learner records yet", path.display());
-    }
-    let out = run_dir.join("report");
-    std::fs::create_dir_all(&out)?;
-    for (key, label) in [
-        ("episode_return", "episode reward"),
-        ("terrain_level", "terrain level"),
-        ("lin_vel_error", "xy-velocity tracking error (m/s)"),
-        ("yaw_rate_error", "yaw-rate tracking error (rad/s)"),
-        ("episode_length", "episode length (steps)"),
-    ] {
-        let raw = series(&records, key);
-        if raw.is_empty() {
-            continue;
+    let mut runs = Vec::with_capacity(args.runs.len());
+    for run in &args.runs {
+        l3p_proto::keys::validate_segment("run", run)?;
+        let path = metrics_path(&args.data_dir.join(run));
+        let records = load_learner_records(&path)
+            .map_err(|e| anyhow::anyhow!("cannot read {}: {e}", path.display()))?;
+        if records.is_empty() {
+            anyhow::bail!("{} holds no learner records yet", path.display());
         }
-        let svg = svg_chart(
-            &format!("{} — {label}", args.run),
-            label,
-            &raw,
-            &smooth(&raw, args.window),
-        );
-        let file = out.join(format!("{key}.svg"));
-        std::fs::write(&file, svg)?;
-        println!("wrote {}", file.display());
+        runs.push((run.as_str(), records));
     }
-    let row = ReportRow::from_records(&records, args.window);
+    let out = match (&args.out, runs.as_slice()) {
+        (Some(dir), _) => dir.clone(),
+        (None, [(run, _)]) => args.data_dir.join(run).join("report"),
+        (None, _) => args.data_dir.join("reports").join(args.runs.join("_vs_")),
+    };
+    std::fs::create_dir_all(&out)?;
+    let title = args.runs.join(" vs ");
+    for (key, label) in CHARTS {
+        let raws: Vec<(&str, Vec<(f64, f64)>)> = runs
+            .iter()
+            .map(|(run, records)| (*run, series(records, key)))
+            .filter(|(_, raw)| !raw.is_empty())
+            .collect();
+        let (svg, png) = match raws.as_slice() {
+            [] => continue,
+            [(_, raw)] => {
+                let smoothed = smooth(raw, args.window);
+                let title = format!("{title} — {label}");
+                (
+                    svg_chart(&title, label, raw, &smoothed),
+                    png_chart(&title, label, raw, &smoothed),
+                )
+            }
+            several => {
+                let lines: Vec<(String, Vec<(f64, f64, f64, f64)>)> = several
+                    .iter()
+                    .map(|(run, raw)| {
+                        let line = smooth(raw, args.window)
+                            .into_iter()
+                            .map(|(x, y)| (x, y, y, y))
+                            .collect();
+                        (run.to_string(), line)
+                    })
+                    .collect();
+                let title = format!("{label} (smoothed over {} iterations)", args.window);
+                (
+                    svg_bands(&title, label, &lines),
+                    png_bands(&title, label, &lines),
+                )
+            }
+        };
+        for (ext, bytes) in [("svg", svg.into_bytes()), ("png", png)] {
+            let file = out.join(format!("{key}.{ext}"));
+            std::fs::write(&file, bytes)?;
+            println!("wrote {}", file.display());
+        }
+    }
     let it = |v: Option<u64>| v.map(|v| v.to_string()).unwrap_or_else(|| "—".into());
     println!();
     println!(
         "| run | iterations | level 85% | level 95% | reward 85% | reward 95% | final level | final reward | vel err | yaw err |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|");
-    println!(
-        "| {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.3} | {:.3} |",
-        args.run,
-        row.iterations,
-        it(row.level_85),
-        it(row.level_95),
-        it(row.reward_85),
-        it(row.reward_95),
-        row.final_level,
-        row.final_reward,
-        row.lin_vel_error,
-        row.yaw_rate_error
-    );
+    for (run, records) in &runs {
+        let row = ReportRow::from_records(records, args.window);
+        println!(
+            "| {} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.3} | {:.3} |",
+            run,
+            row.iterations,
+            it(row.level_85),
+            it(row.level_95),
+            it(row.reward_85),
+            it(row.reward_95),
+            row.final_level,
+            row.final_reward,
+            row.lin_vel_error,
+            row.yaw_rate_error
+        );
+    }
     Ok(())
 }

@@ -205,6 +205,7 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
     assert!(exp.join("report/README.md").exists());
     let svg = std::fs::read_to_string(exp.join("report/go1-episode_return.svg")).unwrap();
     assert!(svg.contains("l3p-transfer (1 seeds)"), "{svg}");
+    assert!(exp.join("report/go1-episode_return.png").exists());
 }
 
 /// The pid an arm's `running.pid` names (0 when gone).

@@ -13,8 +13,10 @@ fn l3p(args: &[&str]) -> (bool, String) {
     )
 }
 
-const COMMANDS: [&str; 15] = [
+const COMMANDS: [&str; 17] = [
     "train",
+    "play",
+    "experiment",
     "transfer",
     "learner",
     "actor",

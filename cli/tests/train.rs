@@ -126,6 +126,19 @@ envs = 4
         data.join("local/report/episode_return.svg").exists()
             || !metrics.contains("episode_return")
     );
+    // Several runs overlay into one set of charts (here the run with itself).
+    let out = l3p(&["report", "local", "local", "--data-dir", data_arg]);
+    assert!(out.status.success());
+    if metrics.contains("lin_vel_error") {
+        assert!(data.join("local/report/lin_vel_error.png").exists());
+        let overlay = data.join("reports/local_vs_local/lin_vel_error.svg");
+        let svg = std::fs::read_to_string(&overlay).unwrap();
+        assert_eq!(svg.matches("<polyline").count(), 2, "{svg}");
+        assert!(
+            data.join("reports/local_vs_local/lin_vel_error.png")
+                .exists()
+        );
+    }
 }
 
 /// Pids of the processes whose parent is `parent` and whose command line holds `needle`.

@@ -47,6 +47,43 @@ pub fn env_for_policy(base: &EnvConfig, obs_dim: usize, io: Option<&RobotIo>) ->
     env
 }
 
+/// [`env_for_policy`] for simulating `robot` under a policy: when the policy was trained on this
+/// robot, its PD gains too (`io.kp`/`io.kd` are the training gains × the centre of the kp/kd
+/// randomisation, so the centre of `base`'s ranges is divided out). Without them a policy trained at
+/// other gains than the catalog's (`[env.gains.<robot>]`) would be judged on a robot it never
+/// drove. Another robot (zero-shot transfer) keeps its own gains.
+pub fn sim_env_for_policy(
+    base: &EnvConfig,
+    policy: &l3p_policy::infer::ExportConfig,
+    robot: &str,
+) -> EnvConfig {
+    let mut env = env_for_policy(base, policy.obs_dim, policy.io.as_ref());
+    let same_robot = |a: &str| a.to_ascii_lowercase().replace('-', "_");
+    if let Some(io) = &policy.io
+        && same_robot(&policy.robot) == same_robot(robot)
+        && !io.kp.is_empty()
+        && !io.kd.is_empty()
+    {
+        let mean = |v: &[f32]| v.iter().sum::<f32>() / v.len() as f32;
+        let randomization = env.randomization(robot);
+        let mid = |r: [f32; 2]| 0.5 * (r[0] + r[1]);
+        let (kp, kd) = (
+            mean(&io.kp) / mid(randomization.kp_scale),
+            mean(&io.kd) / mid(randomization.kd_scale),
+        );
+        if kp.is_finite() && kd.is_finite() && kp > 0.0 && kd >= 0.0 {
+            env.gains.insert(
+                robot.to_string(),
+                l3p_robots::config::GainsOverride {
+                    kp: Some(kp),
+                    kd: Some(kd),
+                },
+            );
+        }
+    }
+    env
+}
+
 /// The I/O contract of `robot` trained under `env`: observation layout (IsaacLab's, unscaled),
 /// training gains (the catalog's × the centre of `env`'s kp/kd scale ranges), default pose, soft
 /// limits, clips, control period.

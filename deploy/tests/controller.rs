@@ -657,3 +657,28 @@ fn the_contract_carries_the_gains_the_policy_was_trained_around() {
     assert!(io.kp.iter().all(|k| (k - 60.0).abs() < 1e-3), "{:?}", io.kp);
     assert!(io.kd.iter().all(|k| (k - 1.32).abs() < 1e-4), "{:?}", io.kd);
 }
+
+/// Simulating a policy on its own robot uses the gains it was trained and is deployed with (its
+/// `io`), whatever the config at hand says; another robot keeps its own.
+#[test]
+fn a_policy_is_simulated_at_its_own_gains_on_its_own_robot_only() {
+    let dir =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session7/policy");
+    let policy = l3p_policy::infer::read_export_json(&dir).unwrap();
+    let io = policy.io.as_ref().unwrap();
+    assert_eq!(
+        io.kp[0].round(),
+        60.0,
+        "trained at kp 60, not the catalog's"
+    );
+    let mut env = flat_env();
+    env.randomization.kp_scale = Some([0.8, 1.0]); // centre 0.9: io / 0.9 × 0.9 = io again
+    let sim = l3p_deploy::io::sim_env_for_policy(&env, &policy, "a1");
+    let gains = sim.training_gains(a1());
+    assert!((gains.kp * 0.9 - io.kp[0]).abs() < 1e-3, "{gains:?}");
+    assert!((gains.kd - io.kd[0]).abs() < 1e-4, "{gains:?}");
+    assert_eq!(sim.gait_clock_hz, io.gait_clock_hz);
+    let go1 = RobotSpec::by_name("go1").unwrap();
+    let other = l3p_deploy::io::sim_env_for_policy(&env, &policy, "go1");
+    assert_eq!(other.training_gains(go1), go1.training_gains);
+}

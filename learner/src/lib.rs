@@ -30,6 +30,7 @@ pub mod daemon;
 pub mod gae;
 pub mod gather;
 pub mod ppo;
+pub mod raster;
 pub mod report;
 pub mod storage;
 pub mod tensorboard;

@@ -1,7 +1,8 @@
 //! Training reports from a run's metrics file: curves as SVG and the paper-style convergence row.
 //!
 //! Main items: [`load_learner_records`], [`series`], [`smooth`], [`convergence_iteration`],
-//! [`ReportRow`] (`ReportRow::from_records`), [`svg_chart`], [`svg_bands`] (curves over seeds).
+//! [`ReportRow`] (`ReportRow::from_records`), [`svg_chart`], [`svg_bands`] (curves over seeds), and
+//! their PNG twins [`png_chart`], [`png_bands`] (drawn by [`crate::raster`]).
 //!
 //! Convergence (DESIGN §6): the first iteration at which the smoothed curve reaches a fraction of its
 //! final value. Rewards can be negative, so "85% of the final value" is measured over the range the
@@ -223,6 +224,207 @@ fn escape(s: &str) -> String {
         .replace('>', "&gt;")
 }
 
+/// One thing drawn inside a chart's frame, in data coordinates.
+enum Layer {
+    Line {
+        points: Vec<(f64, f64)>,
+        colour: &'static str,
+        width: f64,
+    },
+    /// A filled polygon (a band over seeds).
+    Area {
+        points: Vec<(f64, f64)>,
+        colour: &'static str,
+        opacity: f32,
+    },
+    /// A legend entry (the `k`-th).
+    Legend {
+        text: String,
+        colour: &'static str,
+        k: usize,
+    },
+}
+
+/// A chart: title, axis label, data range and layers; drawn as SVG or PNG from the same layout.
+struct Chart {
+    title: String,
+    y_label: String,
+    frame: Frame,
+    layers: Vec<Layer>,
+}
+
+impl Chart {
+    fn svg(&self) -> String {
+        let f = &self.frame;
+        let mut svg = f.open(&self.title, &self.y_label);
+        for layer in &self.layers {
+            svg.push_str(&match layer {
+                Layer::Line {
+                    points,
+                    colour,
+                    width,
+                } => format!(
+                    "<polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"{width}\" points=\"{}\"/>\n",
+                    f.path(points.iter().copied())
+                ),
+                Layer::Area {
+                    points,
+                    colour,
+                    opacity,
+                } => format!(
+                    "<polygon fill=\"{colour}\" fill-opacity=\"{opacity}\" stroke=\"none\" points=\"{}\"/>\n",
+                    f.path(points.iter().copied())
+                ),
+                Layer::Legend { text, colour, k } => format!(
+                    "<text x=\"{}\" y=\"{}\" fill=\"{colour}\">{}</text>\n",
+                    LEFT + 10.0,
+                    TOP + 16.0 + 15.0 * *k as f64,
+                    escape(text)
+                ),
+            });
+        }
+        svg.push_str("</svg>\n");
+        svg
+    }
+
+    fn png(&self) -> Vec<u8> {
+        use crate::raster::{Anchor, Canvas, parse_hex};
+        let f = &self.frame;
+        let mut c = Canvas::new(W as usize, H as usize);
+        let grey = [0x88, 0x88, 0x88];
+        let black = [0, 0, 0];
+        let to_px = |points: &[(f64, f64)]| -> Vec<(f64, f64)> {
+            points
+                .iter()
+                .filter(|p| p.0.is_finite() && p.1.is_finite())
+                .map(|p| (f.sx(p.0), f.sy(p.1)))
+                .collect()
+        };
+        for layer in &self.layers {
+            match layer {
+                Layer::Area {
+                    points,
+                    colour,
+                    opacity,
+                } => c.fill_polygon(&to_px(points), parse_hex(colour), *opacity),
+                Layer::Line {
+                    points,
+                    colour,
+                    width,
+                } => c.polyline(&to_px(points), parse_hex(colour), *width),
+                Layer::Legend { .. } => {}
+            }
+        }
+        let (x0, y0, x1, y1) = (LEFT, TOP, W - RIGHT, H - BOTTOM);
+        for (a, b) in [
+            ((x0, y0), (x1, y0)),
+            ((x1, y0), (x1, y1)),
+            ((x1, y1), (x0, y1)),
+            ((x0, y1), (x0, y0)),
+        ] {
+            c.line(a, b, grey, 1.0);
+        }
+        c.text(W / 2.0, 20.0, &self.title, black, 1, Anchor::Middle);
+        for i in 0..=4 {
+            let fy = f.y0 + (f.y1 - f.y0) * i as f64 / 4.0;
+            let fx = f.x0 + (f.x1 - f.x0) * i as f64 / 4.0;
+            c.text(
+                LEFT - 6.0,
+                f.sy(fy),
+                &format!("{fy:.3}"),
+                black,
+                1,
+                Anchor::End,
+            );
+            c.text(
+                f.sx(fx),
+                H - BOTTOM + 14.0,
+                &format!("{fx:.0}"),
+                black,
+                1,
+                Anchor::Middle,
+            );
+        }
+        c.text(
+            (LEFT + W - RIGHT) / 2.0,
+            H - 12.0,
+            "iteration",
+            black,
+            1,
+            Anchor::Middle,
+        );
+        c.text_vertical(12.0, H / 2.0, &self.y_label, black);
+        for layer in &self.layers {
+            if let Layer::Legend { text, colour, k } = layer {
+                let y = TOP + 12.0 + 15.0 * *k as f64;
+                c.text(LEFT + 10.0, y, text, parse_hex(colour), 1, Anchor::Start);
+            }
+        }
+        c.to_png()
+    }
+}
+
+fn line_chart(title: &str, y_label: &str, raw: &[(f64, f64)], smoothed: &[(f64, f64)]) -> Chart {
+    Chart {
+        title: title.into(),
+        y_label: y_label.into(),
+        frame: Frame::around(raw.iter().copied()),
+        layers: vec![
+            Layer::Line {
+                points: raw.to_vec(),
+                colour: "#9ecae1",
+                width: 1.0,
+            },
+            Layer::Line {
+                points: smoothed.to_vec(),
+                colour: "#08519c",
+                width: 2.0,
+            },
+        ],
+    }
+}
+
+fn bands_chart(title: &str, y_label: &str, lines: &[(String, Vec<(f64, f64, f64, f64)>)]) -> Chart {
+    const COLOURS: [&str; 6] = [
+        "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
+    ];
+    let frame = Frame::around(
+        lines
+            .iter()
+            .flat_map(|(_, p)| p.iter().flat_map(|&(x, _, lo, hi)| [(x, lo), (x, hi)])),
+    );
+    let mut layers = Vec::new();
+    for (k, (label, points)) in lines.iter().enumerate() {
+        let colour = COLOURS[k % COLOURS.len()];
+        let band = points
+            .iter()
+            .map(|&(x, _, _, hi)| (x, hi))
+            .chain(points.iter().rev().map(|&(x, _, lo, _)| (x, lo)))
+            .collect();
+        layers.push(Layer::Area {
+            points: band,
+            colour,
+            opacity: 0.18,
+        });
+        layers.push(Layer::Line {
+            points: points.iter().map(|&(x, m, _, _)| (x, m)).collect(),
+            colour,
+            width: 2.0,
+        });
+        layers.push(Layer::Legend {
+            text: label.clone(),
+            colour,
+            k,
+        });
+    }
+    Chart {
+        title: title.into(),
+        y_label: y_label.into(),
+        frame,
+        layers,
+    }
+}
+
 /// A line chart as a standalone SVG document: raw values faint, smoothed values bold.
 pub fn svg_chart(
     title: &str,
@@ -230,15 +432,17 @@ pub fn svg_chart(
     raw: &[(f64, f64)],
     smoothed: &[(f64, f64)],
 ) -> String {
-    let frame = Frame::around(raw.iter().copied());
-    let mut svg = frame.open(title, y_label);
-    svg.push_str(&format!(
-        "<polyline fill=\"none\" stroke=\"#9ecae1\" stroke-width=\"1\" points=\"{}\"/>\n\
-         <polyline fill=\"none\" stroke=\"#08519c\" stroke-width=\"2\" points=\"{}\"/>\n</svg>\n",
-        frame.path(raw.iter().copied()),
-        frame.path(smoothed.iter().copied())
-    ));
-    svg
+    line_chart(title, y_label, raw, smoothed).svg()
+}
+
+/// [`svg_chart`] as a PNG image.
+pub fn png_chart(
+    title: &str,
+    y_label: &str,
+    raw: &[(f64, f64)],
+    smoothed: &[(f64, f64)],
+) -> Vec<u8> {
+    line_chart(title, y_label, raw, smoothed).png()
 }
 
 /// Several curves with spread, overlaid: for each `(label, points)` with points `(x, mean, lo,
@@ -248,34 +452,16 @@ pub fn svg_bands(
     y_label: &str,
     lines: &[(String, Vec<(f64, f64, f64, f64)>)],
 ) -> String {
-    const COLOURS: [&str; 6] = [
-        "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
-    ];
-    let frame = Frame::around(
-        lines
-            .iter()
-            .flat_map(|(_, p)| p.iter().flat_map(|&(x, _, lo, hi)| [(x, lo), (x, hi)])),
-    );
-    let mut svg = frame.open(title, y_label);
-    for (k, (label, points)) in lines.iter().enumerate() {
-        let colour = COLOURS[k % COLOURS.len()];
-        let band = points
-            .iter()
-            .map(|&(x, _, _, hi)| (x, hi))
-            .chain(points.iter().rev().map(|&(x, _, lo, _)| (x, lo)));
-        svg.push_str(&format!(
-            "<polygon fill=\"{colour}\" fill-opacity=\"0.18\" stroke=\"none\" points=\"{}\"/>\n\
-             <polyline fill=\"none\" stroke=\"{colour}\" stroke-width=\"2\" points=\"{}\"/>\n\
-             <text x=\"{}\" y=\"{}\" fill=\"{colour}\">{}</text>\n",
-            frame.path(band),
-            frame.path(points.iter().map(|&(x, m, _, _)| (x, m))),
-            LEFT + 10.0,
-            TOP + 16.0 + 15.0 * k as f64,
-            escape(label)
-        ));
-    }
-    svg.push_str("</svg>\n");
-    svg
+    bands_chart(title, y_label, lines).svg()
+}
+
+/// [`svg_bands`] as a PNG image.
+pub fn png_bands(
+    title: &str,
+    y_label: &str,
+    lines: &[(String, Vec<(f64, f64, f64, f64)>)],
+) -> Vec<u8> {
+    bands_chart(title, y_label, lines).png()
 }
 
 #[cfg(test)]
@@ -334,5 +520,36 @@ mod tests {
         assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
         assert!(svg.contains("reward &lt;A1&gt;"));
         assert_eq!(svg.matches("<polyline").count(), 2);
+    }
+
+    #[test]
+    fn png_bands_draw_each_mean_in_its_colour_inside_the_frame() {
+        let line = |offset: f64| -> Vec<(f64, f64, f64, f64)> {
+            (0..50)
+                .map(|i| {
+                    let m = offset + i as f64;
+                    (i as f64, m, m - 2.0, m + 2.0)
+                })
+                .collect()
+        };
+        let png = png_bands(
+            "go1 — reward",
+            "reward",
+            &[("mlp".into(), line(0.0)), ("l3p".into(), line(20.0))],
+        );
+        let decoder = png::Decoder::new(std::io::Cursor::new(png));
+        let mut reader = decoder.read_info().unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        assert_eq!((info.width as f64, info.height as f64), (W, H));
+        let count = |rgb: [u8; 3]| buf.chunks(3).filter(|p| *p == rgb).count();
+        // Both means are drawn (2 px wide over ~600 px), the band is tinted, text is black.
+        assert!(count([0x1f, 0x77, 0xb4]) > 600, "first mean");
+        assert!(count([0xff, 0x7f, 0x0e]) > 600, "second mean");
+        assert!(count([0, 0, 0]) > 200, "labels");
+        assert!(
+            buf.chunks(3).any(|p| p[2] > p[0] && p[0] > 200),
+            "a light blue band"
+        );
     }
 }

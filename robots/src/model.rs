@@ -5,7 +5,8 @@
 //! Frames follow URDF: a body's frame is the frame of its first (movable) link, which coincides with
 //! its joint frame at zero joint angle. Math is `f32` glam (the types rapier uses).
 
-use rapier3d::math::{Mat3, Pose, Rot3, Vec3};
+pub use rapier3d::math::Pose;
+use rapier3d::math::{Mat3, Rot3, Vec3};
 
 /// A primitive collision shape, in the body frame given by [`ColliderSpec::pose`].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -18,6 +19,13 @@ pub enum ShapeSpec {
     Capsule { half_length: f32, radius: f32 },
     /// Cylinder along the local z axis (URDF convention).
     Cylinder { half_length: f32, radius: f32 },
+}
+
+/// A pose as plain arrays: translation and rotation quaternion `[x, y, z, w]` (for callers, such
+/// as viewers, that do not link rapier).
+pub fn pose_arrays(pose: &Pose) -> ([f32; 3], [f32; 4]) {
+    let (t, q) = (pose.translation, pose.rotation);
+    ([t.x, t.y, t.z], [q.x, q.y, q.z, q.w])
 }
 
 /// A collider attached to a body.

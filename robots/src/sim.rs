@@ -874,6 +874,35 @@ impl SimWorld {
         }
     }
 
+    /// World poses of a robot's bodies in its model's body order (what a viewer draws: each
+    /// body's `colliders` sit at their `pose` in this frame). Empty for an unknown robot.
+    pub fn body_poses(&self, robot: usize) -> Vec<Pose> {
+        self.robots
+            .get(robot)
+            .map(|r| {
+                r.bodies
+                    .iter()
+                    .filter_map(|h| self.world.bodies.get(*h).map(|b| *b.position()))
+                    .collect()
+            })
+            .unwrap_or_default()
+    }
+
+    /// World position of each foot (canonical order): the centre of its first collider.
+    pub fn foot_positions(&self, robot: usize) -> [[f32; 3]; NUM_FEET] {
+        let mut out = [[0.0; 3]; NUM_FEET];
+        let Some(r) = self.robots.get(robot) else {
+            return out;
+        };
+        for (slot, colliders) in out.iter_mut().zip(&r.feet) {
+            if let Some(c) = colliders.first().and_then(|h| self.world.colliders.get(*h)) {
+                let t = c.position().translation;
+                *slot = [t.x, t.y, t.z];
+            }
+        }
+        out
+    }
+
     /// Base position of a robot (world).
     pub fn base_position(&self, robot: usize) -> Vec3 {
         self.robots

@@ -24,7 +24,8 @@ use crate::gait::{GaitMeter, GaitReport, GaitSample};
 use crate::model::RobotModel;
 use crate::sim::{JointDynamics, RobotBinding, SimConfig, SimWorld};
 use crate::task::{
-    DoneReason, NUM_REWARD_TERMS, RobotState, StepResult, Task, TaskEnvState, TaskError,
+    Command, DoneReason, NUM_FEET, NUM_REWARD_TERMS, RobotState, StepResult, Task, TaskEnvState,
+    TaskError,
 };
 use crate::terrain::{Curriculum, Terrain, TerrainError, TerrainType};
 use crate::urdf::UrdfError;
@@ -165,6 +166,22 @@ struct Shared {
     default_pose: [f32; NUM_JOINTS],
     /// Heightfield blocks and their poses (`None` on flat ground).
     ground: Option<Vec<(rapier3d::prelude::SharedShape, Pose)>>,
+}
+
+/// One env as a viewer sees it (see [`VecEnv::snapshot`]).
+#[derive(Debug, Clone)]
+pub struct EnvSnapshot<'a> {
+    pub state: &'a RobotState,
+    /// World poses of the model's bodies, in [`RobotModel::bodies`] order.
+    pub body_poses: Vec<Pose>,
+    /// World position of each foot (canonical order).
+    pub foot_positions: [[f32; 3]; NUM_FEET],
+    /// Joint position targets of the last step (canonical order, rad).
+    pub joint_targets: [f32; NUM_JOINTS],
+    /// The command the env follows.
+    pub command: Command,
+    /// The env's terrain tile origin.
+    pub origin: [f32; 3],
 }
 
 /// N envs of one robot, stepped in parallel.
@@ -392,6 +409,44 @@ impl VecEnv {
             .iter()
             .find(|w| e >= w.first_env && e < w.first_env + w.n)
             .map(|w| &w.states[e - w.first_env])
+    }
+
+    /// What a viewer draws of env `e` after the last step or reset (`None` for an unknown env).
+    pub fn snapshot(&self, e: usize) -> Option<EnvSnapshot<'_>> {
+        let w = self
+            .workers
+            .iter()
+            .find(|w| e >= w.first_env && e < w.first_env + w.n)?;
+        let i = e - w.first_env;
+        Some(EnvSnapshot {
+            state: &w.states[i],
+            body_poses: w.sim.body_poses(i),
+            foot_positions: w.sim.foot_positions(i),
+            joint_targets: w.targets[i],
+            command: w.envs[i].command,
+            origin: w.origins[i],
+        })
+    }
+
+    /// Replaces env `e`'s command until the task resamples it (`l3p play`'s command schedule sets it
+    /// every step); false for an unknown env.
+    pub fn set_command(&mut self, e: usize, command: Command) -> bool {
+        match self
+            .workers
+            .iter_mut()
+            .find(|w| e >= w.first_env && e < w.first_env + w.n)
+        {
+            Some(w) => {
+                w.envs[e - w.first_env].command = command;
+                true
+            }
+            None => false,
+        }
+    }
+
+    /// The simulated robot's model (bodies and their collision shapes, for viewers).
+    pub fn model(&self) -> &RobotModel {
+        &self.shared.model
     }
 
     /// The policy's mean actions (`[num_envs * 12]`) behind the next [`VecEnv::step`]'s sampled
