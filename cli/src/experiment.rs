@@ -429,6 +429,9 @@ pub struct ArmResult {
     pub eval_yaw_rate_error: f64,
     pub eval_return: f64,
     pub zero_shot_return: Option<f64>,
+    /// Whether the arm trained over a terrain curriculum (on flat ground the level is meaningless
+    /// and its columns stay empty).
+    pub terrain_levels: bool,
 }
 
 /// Mean and sample standard deviation (0 for one value); `None` when there are no values.
@@ -511,11 +514,32 @@ pub fn markdown_table(results: &[ArmResult]) -> String {
         }
     };
     let mut out = String::from(
-        "| robot | method | seeds | level 85% Cv. | level 95% Cv. | final level | reward 85% Cv. | reward 95% Cv. | final reward | xy-vel err (m/s) | yaw err (rad/s) | zero-shot return | wall (min) | paper reward 85% / 95% Cv. |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| robot | method | seeds | level 85% Cv. | level 95% Cv. | final level | reward 85% Cv. | reward 95% Cv. | final reward | % of scratch | xy-vel err (m/s) | yaw err (rad/s) | zero-shot return | wall (min) | paper reward 85% / 95% Cv. |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
+    let mean_final = |robot: &str, method: &str| -> Option<f64> {
+        groups
+            .get(&(robot.to_string(), method))
+            .and_then(|rs| mean_std(&rs.iter().map(|r| r.row.final_reward).collect::<Vec<_>>()))
+            .map(|(m, _)| m)
+    };
     for ((robot, method), rs) in &groups {
         let col = |f: &dyn Fn(&ArmResult) -> f64| -> Vec<f64> { rs.iter().map(|r| f(r)).collect() };
+        // A transferred policy's final reward as a share of the same architecture from scratch.
+        let scratch = match *method {
+            "mlp-transfer" => Some("mlp"),
+            "l3p-transfer" => Some("l3p"),
+            _ => None,
+        };
+        let share = match (
+            scratch.and_then(|m| mean_final(robot, m)),
+            mean_final(robot, method),
+        ) {
+            (Some(base), Some(ours)) if base.abs() > 1e-9 => format!("{:.0}%", 100.0 * ours / base),
+            _ => "—".into(),
+        };
+        let levels = rs.iter().any(|r| r.terrain_levels);
+        let level = |text: String| if levels { text } else { "— (flat)".into() };
         let paper = PAPER_TABLE
             .iter()
             .find(|p| p.0 == robot && p.1 == *method)
@@ -523,11 +547,11 @@ pub fn markdown_table(results: &[ArmResult]) -> String {
             .unwrap_or_else(|| "—".into());
         let zero: Vec<f64> = rs.iter().filter_map(|r| r.zero_shot_return).collect();
         out.push_str(&format!(
-            "| {robot} | {method} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {paper} |\n",
+            "| {robot} | {method} | {} | {} | {} | {} | {} | {} | {} | {share} | {} | {} | {} | {} | {paper} |\n",
             rs.len(),
-            conv(rs, &|r| r.level_85),
-            conv(rs, &|r| r.level_95),
-            fmt(mean_std(&col(&|r| r.row.final_level)), 2),
+            level(conv(rs, &|r| r.level_85)),
+            level(conv(rs, &|r| r.level_95)),
+            level(fmt(mean_std(&col(&|r| r.row.final_level)), 2)),
             conv(rs, &|r| r.reward_85),
             conv(rs, &|r| r.reward_95),
             fmt(mean_std(&col(&|r| r.row.final_reward)), 2),
@@ -731,6 +755,7 @@ terrain = "flat"
             eval_yaw_rate_error: 0.25,
             eval_return: reward,
             zero_shot_return: (method == Mode::L3pTransfer).then_some(1.5),
+            terrain_levels: false,
         }
     }
 
@@ -754,5 +779,17 @@ terrain = "flat"
         let mlp = rows.iter().find(|r| r.contains("| mlp |")).unwrap();
         assert!(mlp.contains("100 ± 0 (1/2 reached)"), "{mlp}");
         assert!(mlp.contains("| 2.0 ± 0.0 |"), "{mlp}"); // wall minutes
+        // On flat ground the level columns are empty; a transfer arm's reward is compared with
+        // the same architecture from scratch (no l3p scratch arm here).
+        assert!(mlp.contains("| — (flat) | — (flat) | — (flat) |"), "{mlp}");
+        assert!(transfer.contains("| 21.00 ± 1.41 | — |"), "{transfer}");
+        let with_scratch = markdown_table(&[
+            result("go1", Mode::L3pTransfer, 1, Some(40), 21.0),
+            result("go1", Mode::L3p, 1, Some(90), 14.0),
+        ]);
+        assert!(
+            with_scratch.contains("| 21.00 ± 0.00 | 150% |"),
+            "{with_scratch}"
+        );
     }
 }

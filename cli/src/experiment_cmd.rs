@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 use clap::{Args, Subcommand};
 use l3p_learner::report::{ReportRow, load_learner_records, series, smooth};
 use l3p_proto::MetricsRecord;
+use l3p_robots::config::TerrainPreset;
 
 use crate::config::Config;
 use crate::experiment::{
@@ -453,6 +454,7 @@ fn collect_results(finished: &[Finished], window: usize) -> Vec<ArmResult> {
             eval_return: mix
                 .map(|r| r.summary.episode_return as f64)
                 .unwrap_or(f64::NAN),
+            terrain_levels: arm.config.env.terrain.preset != TerrainPreset::Flat,
             zero_shot_return: done.zero_shot.as_ref().and_then(|rows| {
                 rows.iter()
                     .find(|r| r.forward.is_none())
@@ -501,6 +503,12 @@ fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
             ("episode_return", "episode reward"),
             ("terrain_level", "terrain level"),
         ] {
+            let levels = results
+                .iter()
+                .any(|r| r.robot == *robot && r.terrain_levels);
+            if key == "terrain_level" && !levels {
+                continue;
+            }
             let mut lines = Vec::new();
             for method in [
                 l3p_learner::Mode::Mlp,

@@ -1,0 +1,35 @@
+#!/usr/bin/env bash
+# Keep an experiment's results across machines: pack what `l3p experiment report` and a resumed
+# `l3p experiment run` need from finished arms (done.json, the learner's metrics, the arm configs,
+# and the pretraining arms' final checkpoints, which the transfer arms start from) into one tarball,
+# or unpack it back. Unfinished arms are left out: a resumed run starts them again.
+#
+#   experiments/archive.sh pack   l3p-data/experiments/laptop docs/experiments/<date>-laptop/arms.tar.gz
+#   experiments/archive.sh unpack docs/experiments/<date>-laptop/arms.tar.gz l3p-data/experiments/laptop
+set -euo pipefail
+mode=${1:?pack|unpack}; from=${2:?source}; to=${3:?destination}
+case "$mode" in
+  pack)
+    list=$(mktemp)
+    (
+      cd "$from"
+      ls arms/*.toml
+      for done in */done.json; do
+        arm=${done%/done.json}
+        echo "$done"
+        echo "$arm/$arm/metrics.jsonl"
+        case "$arm" in pretrain-*) echo "$arm/$arm/checkpoints/latest.ckpt" ;; esac
+      done
+    ) > "$list"
+    mkdir -p "$(dirname "$to")"
+    tar -C "$from" -czf "$to" -T "$list"
+    echo "packed $(grep -c done.json "$list") finished arms into $to ($(du -h "$to" | cut -f1))"
+    rm -f "$list"
+    ;;
+  unpack)
+    mkdir -p "$to"
+    tar -C "$to" -xzf "$from"
+    echo "unpacked into $to; \`l3p experiment status\` shows what is done"
+    ;;
+  *) echo "usage: $0 pack|unpack <from> <to>" >&2; exit 2 ;;
+esac
