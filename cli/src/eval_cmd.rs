@@ -165,9 +165,15 @@ pub struct EvalRow {
 
 /// Sets a constant forward command: vx = v, vy = wz = 0, heading mode off, nobody standing.
 pub fn constant_forward_command(env: &mut l3p_robots::config::EnvConfig, v: f32) {
-    env.commands.lin_vel_x = [v, v];
-    env.commands.lin_vel_y = [0.0, 0.0];
-    env.commands.ang_vel_z = [0.0, 0.0];
+    constant_command(env, v, 0.0, 0.0);
+}
+
+/// Sets one constant command (the one every env starts with and resamples to): heading mode
+/// off, nobody standing.
+pub fn constant_command(env: &mut l3p_robots::config::EnvConfig, vx: f32, vy: f32, wz: f32) {
+    env.commands.lin_vel_x = [vx, vx];
+    env.commands.lin_vel_y = [vy, vy];
+    env.commands.ang_vel_z = [wz, wz];
     env.commands.heading_command = false;
     env.commands.rel_standing_envs = 0.0;
 }

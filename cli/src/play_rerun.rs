@@ -82,7 +82,7 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
         let spec = RobotSpec::by_name(&entry.robot)?;
         let mut env_cfg =
             l3p_deploy::io::sim_env_for_policy(&config.env, &policy.config, spec.name);
-        constant_command(&mut env_cfg, first);
+        crate::eval_cmd::constant_command(&mut env_cfg, first.vx, first.vy, first.wz);
         let mut env = VecEnv::new(spec, &env_cfg, 1, 1, args.seed)?;
         if env.obs_dim() != policy.obs_dim() || env.action_dim() != policy.action_dim() {
             anyhow::bail!(
@@ -153,7 +153,7 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
 
     let dt = players[0].env.task().spec.step_dt;
     let steps = (args.seconds / dt).round().max(1.0) as usize;
-    let (mut rewards, mut started) = (Vec::new(), Instant::now());
+    let mut started = Instant::now();
     let mut current = first;
     for step in 0..steps {
         let t = step as f32 * dt;
@@ -178,8 +178,6 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
                 .map_err(|e| anyhow::anyhow!("policy {}: {e}", p.entry.policy))?;
             let out = p.env.step(&p.means)?;
             p.obs.copy_from_slice(out.obs);
-            rewards.clear();
-            rewards.extend_from_slice(out.rewards);
             let ended: Vec<String> = out
                 .episodes
                 .iter()
@@ -224,16 +222,6 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
-}
-
-/// Sets the config's command ranges to one constant command (heading mode off, nobody standing):
-/// the command the env starts with and resamples to.
-fn constant_command(env: &mut l3p_robots::config::EnvConfig, c: VelocityCommand) {
-    env.commands.lin_vel_x = [c.vx, c.vx];
-    env.commands.lin_vel_y = [c.vy, c.vy];
-    env.commands.ang_vel_z = [c.wz, c.wz];
-    env.commands.heading_command = false;
-    env.commands.rel_standing_envs = 0.0;
 }
 
 fn to_task_command(c: VelocityCommand) -> Command {
