@@ -20,6 +20,7 @@ use std::time::{Duration, Instant};
 use l3p_policy::DeployPolicy;
 use l3p_policy::infer::InferScratch;
 use l3p_robots::catalog::{NUM_JOINTS, RobotSpec};
+use l3p_robots::config::COMMAND_OBS;
 use l3p_robots::gait::GaitReport;
 use l3p_robots::model::{ShapeSpec, pose_arrays};
 use l3p_robots::task::{Command, NUM_FEET, yaw_of};
@@ -161,7 +162,14 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
         if wanted != current {
             current = wanted;
             for p in &mut players {
-                p.env.set_command(0, to_task_command(current));
+                let command = to_task_command(current);
+                p.env.set_command(0, command);
+                // The observation the policy acts on next was taken before the change: give it
+                // the new command now, as the task's next observation would, not one step late.
+                let clip = p.env.task().spec.obs_clip;
+                for (o, c) in p.obs[COMMAND_OBS].iter_mut().zip(command.as_array()) {
+                    *o = c.clamp(-clip, clip);
+                }
             }
             rec.log(
                 "events",

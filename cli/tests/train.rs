@@ -278,15 +278,16 @@ envs = 4
     assert!(!checks.is_empty(), "no walk check recorded");
     assert_eq!(checks[0]["iteration"], 2, "{:?}", checks[0]["iteration"]);
     for c in &checks {
+        // The harder speed is evaluated first; while it fails, the 0.5 m/s row is not run.
         let rows = c["rows"].as_array().unwrap();
-        assert_eq!(rows.len(), 2, "{c}");
-        assert_eq!(rows[0]["forward"], 0.5);
+        assert_eq!(rows.len(), 1, "{c}");
+        assert_eq!(rows[0]["forward"], 1.0);
         assert!(
             !rows[0]["walk_failures"].as_array().unwrap().is_empty(),
             "{c}"
         );
         assert!(
-            rows[1]["gait"]["target_change_rms"].as_f64().is_some(),
+            rows[0]["gait"]["target_change_rms"].as_f64().is_some(),
             "{c}"
         );
     }

@@ -908,6 +908,8 @@ base_height_fraction = 1.0
 
 /// Number of proprioceptive observations.
 pub const PROPRIO_OBS: usize = 48;
+/// Where the velocity command `[vx, vy, wz]` sits in the observation (noise-free).
+pub const COMMAND_OBS: std::ops::Range<usize> = 9..12;
 /// Number of height-scan samples (17 × 11).
 pub const HEIGHT_SCAN_OBS: usize = 187;
 /// Number of gait-clock observations (`sin`, `cos` of the phase).

@@ -34,7 +34,7 @@
 use rand::Rng;
 use thiserror::Error;
 
-use crate::config::{GAIT_CLOCK_OBS, HEIGHT_SCAN_OBS, PROPRIO_OBS, TaskSpec};
+use crate::config::{COMMAND_OBS, GAIT_CLOCK_OBS, HEIGHT_SCAN_OBS, PROPRIO_OBS, TaskSpec};
 pub use crate::config::{NUM_REWARD_TERMS, RewardTerm};
 use crate::terrain::Terrain;
 
@@ -1009,7 +1009,7 @@ impl Task {
             put(k, v[k], nz.lin_vel, rng);
             put(3 + k, w[k], nz.ang_vel, rng);
             put(6 + k, g[k], nz.gravity, rng);
-            put(9 + k, c[k], 0.0, rng);
+            put(COMMAND_OBS.start + k, c[k], 0.0, rng);
         }
         for j in 0..NUM_JOINTS {
             put(
