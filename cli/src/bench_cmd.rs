@@ -18,8 +18,8 @@ pub struct BenchArgs {
 pub enum BenchCommand {
     /// Simulator throughput: N envs, random actions, physics + observations + rewards + resets.
     Sim(SimBenchArgs),
-    /// Learner throughput: one full PPO update (5 epochs × 4 minibatches) on synthetic data, and
-    /// policy inference for a batch of `envs` observations.
+    /// Learner throughput: one full PPO update (the config's epochs × minibatches; rsl_rl's 5 × 4
+    /// without one) on synthetic data, and policy inference for a batch of `envs` observations.
     Learner(LearnerBenchArgs),
     /// Deploy loop at 50 Hz: tick-period error and inference latency of `l3p deploy` driving an
     /// in-process `sim-robot` over loopback Zenoh, against a bare deadline loop (no work) as the
@@ -165,6 +165,9 @@ fn bench_train_in(a: &TrainBenchArgs, scratch: &std::path::Path) -> anyhow::Resu
             quiet: true,
             until_walks: false,
             eval_every: 25,
+            screen_every: 0,
+            rerun: None,
+            rerun_every: 50,
         },
     })?;
     let text = std::fs::read_to_string(l3p_learner::daemon::metrics_path(&scratch.join("bench")))?;
@@ -231,6 +234,7 @@ fn learner(a: LearnerBenchArgs) -> anyhow::Result<()> {
         from_config: None,
     };
     let mut what = format!("mode {} hidden {:?}", a.mode, a.hidden);
+    let mut ppo = l3p_learner::PpoConfig::default();
     if let Some(path) = &a.config {
         let config = crate::config::Config::load(path)?;
         let actor = config
@@ -243,6 +247,7 @@ fn learner(a: LearnerBenchArgs) -> anyhow::Result<()> {
         cfg.envs = actor.envs;
         cfg.steps = config.rollout.steps_per_env;
         cfg.mode = config.ppo.mode;
+        ppo = config.ppo.clone();
         cfg.from_config = Some((config.model.clone(), config.ppo.clone()));
         what = format!("{} ({})", path.display(), config.ppo.mode.as_str());
     }
@@ -252,8 +257,8 @@ fn learner(a: LearnerBenchArgs) -> anyhow::Result<()> {
         cfg.obs_dim, cfg.envs, cfg.steps, a.threads, r.actor_params
     );
     println!(
-        "  update (5 epochs x 4 minibatches): {:.3} s, {:.0} samples/s",
-        r.update_seconds, r.samples_per_second
+        "  update ({} epochs x {} minibatches): {:.3} s, {:.0} samples/s",
+        ppo.num_learning_epochs, ppo.num_mini_batches, r.update_seconds, r.samples_per_second
     );
     println!(
         "  inference, batch {}: burn {:.0} obs/s, pure-Rust export {:.0} obs/s",

@@ -31,7 +31,9 @@ use rerun::{
 };
 
 use crate::config::Config;
-use crate::play_cmd::{PlayArgs, SceneEntry, Sink, VelocityCommand, sanitize, scene};
+use crate::play_cmd::{
+    CommandSchedule, PlayArgs, SceneEntry, Sink, VelocityCommand, sanitize, scene,
+};
 
 /// Lateral spacing of side-by-side robots (m).
 const SPACING: f32 = 1.5;
@@ -75,16 +77,83 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
     config.env.terrain.preset = crate::eval_cmd::terrain_preset(&args.terrain)?;
     args.pins.apply(&mut config.env);
     let schedule = args.schedule()?;
-    let first = schedule.at(0.0);
-    let entries = scene(&args.robot, &args.policy)?;
-    let mut players = Vec::with_capacity(entries.len());
-    for (k, entry) in entries.into_iter().enumerate() {
+    let mut scene_policies = Vec::new();
+    for entry in scene(&args.robot, &args.policy)? {
         let policy = crate::eval_cmd::load_policy(&entry.policy, &args.data_dir)?;
+        scene_policies.push((entry, policy));
+    }
+    let mut players = build_players(&config.env, scene_policies, schedule.at(0.0), args.seed)?;
+
+    let builder = rerun::RecordingStreamBuilder::new("l3p");
+    let rec = match args.sink()? {
+        Sink::Save(path) => builder.save(&path).map_err(rec_err)?,
+        Sink::Connect(url) => builder.connect_grpc_opts(url).map_err(rec_err)?,
+        Sink::Spawn => builder.spawn().map_err(rec_err)?,
+    };
+    send_layout(&rec, &players)?;
+    let steps = record(&rec, &mut players, &schedule, args.seconds, args.realtime)?;
+    for p in &players {
+        println!(
+            "{}",
+            summary_markdown(p, &p.env.gait_report(), args.seconds)
+        );
+    }
+    rec.flush_blocking().map_err(rec_err)?;
+    if let Some(path) = &args.save {
+        println!(
+            "wrote {} ({steps} control steps); open it with rerun-sdk {} (`pip install \
+             rerun-sdk=={}`, then `rerun {}`)",
+            path.display(),
+            crate::play_cmd::RERUN_VERSION,
+            crate::play_cmd::RERUN_VERSION,
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// A short rollout of `policy` on `robot` at a constant `command`, logged into `rec` (a training
+/// run's stream) with the `l3p play` entity layout, at `iteration` on the `iteration` timeline;
+/// each rollout overwrites the previous one's entities.
+pub fn log_training_rollout(
+    rec: &RecordingStream,
+    env: &l3p_robots::config::EnvConfig,
+    robot: &str,
+    policy: DeployPolicy,
+    iteration: u64,
+    command: VelocityCommand,
+    seconds: f32,
+) -> anyhow::Result<()> {
+    let entry = SceneEntry {
+        robot: robot.to_string(),
+        policy: format!("iteration {iteration}"),
+        label: sanitize(robot),
+    };
+    let mut players = build_players(env, vec![(entry, policy)], command, iteration)?;
+    rec.set_time_sequence("iteration", iteration as i64);
+    record(
+        rec,
+        &mut players,
+        &CommandSchedule::constant(command),
+        seconds,
+        false,
+    )?;
+    Ok(())
+}
+
+/// One single-env player per scene entry, spawned facing +x, side by side along y.
+fn build_players(
+    env: &l3p_robots::config::EnvConfig,
+    entries: Vec<(SceneEntry, DeployPolicy)>,
+    first: VelocityCommand,
+    seed: u64,
+) -> anyhow::Result<Vec<Player>> {
+    let mut players = Vec::with_capacity(entries.len());
+    for (k, (entry, policy)) in entries.into_iter().enumerate() {
         let spec = RobotSpec::by_name(&entry.robot)?;
-        let mut env_cfg =
-            l3p_deploy::io::sim_env_for_policy(&config.env, &policy.config, spec.name);
+        let mut env_cfg = l3p_deploy::io::sim_env_for_policy(env, &policy.config, spec.name);
         crate::eval_cmd::constant_command(&mut env_cfg, first.vx, first.vy, first.wz);
-        let mut env = VecEnv::new(spec, &env_cfg, 1, 1, args.seed)?;
+        let mut env = VecEnv::new(spec, &env_cfg, 1, 1, seed)?;
         if env.obs_dim() != policy.obs_dim() || env.action_dim() != policy.action_dim() {
             anyhow::bail!(
                 "policy {} has obs {} / action {}, but {} here has obs {} / action {}",
@@ -127,14 +196,18 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
             prev_targets: None,
         });
     }
+    Ok(players)
+}
 
-    let builder = rerun::RecordingStreamBuilder::new("l3p");
-    let rec = match args.sink()? {
-        Sink::Save(path) => builder.save(&path).map_err(rec_err)?,
-        Sink::Connect(url) => builder.connect_grpc_opts(url).map_err(rec_err)?,
-        Sink::Spawn => builder.spawn().map_err(rec_err)?,
-    };
-    send_layout(&rec, &players)?;
+/// Logs the scene's static parts, then plays `seconds` of `schedule` (on the `step` and
+/// `sim_time` timelines) and each player's gait summary; returns the control steps played.
+fn record(
+    rec: &RecordingStream,
+    players: &mut [Player],
+    schedule: &CommandSchedule,
+    seconds: f32,
+    realtime: bool,
+) -> anyhow::Result<usize> {
     rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())
         .map_err(rec_err)?;
     let speed = |f: &dyn Fn(&VelocityCommand) -> f32| {
@@ -144,24 +217,24 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
             .map(|(_, c)| f(c).abs())
             .fold(0.0f32, f32::max)
     };
-    let reach = speed(&|c| c.vx.abs().max(c.vy.abs())) * args.seconds;
+    let reach = speed(&|c| c.vx.abs().max(c.vy.abs())) * seconds;
     // Turning or side-stepping leaves the lane: then the ground is a square around the start.
     let straight = speed(&|c| c.vy) == 0.0 && speed(&|c| c.wz) == 0.0;
-    log_ground(&rec, &players, reach, straight)?;
-    for p in &players {
-        log_robot_static(&rec, p)?;
+    log_ground(rec, players, reach, straight)?;
+    for p in players.iter() {
+        log_robot_static(rec, p)?;
     }
 
     let dt = players[0].env.task().spec.step_dt;
-    let steps = (args.seconds / dt).round().max(1.0) as usize;
+    let steps = (seconds / dt).round().max(1.0) as usize;
     let mut started = Instant::now();
-    let mut current = first;
+    let mut current = schedule.at(0.0);
     for step in 0..steps {
         let t = step as f32 * dt;
         let wanted = schedule.at(t);
         if wanted != current {
             current = wanted;
-            for p in &mut players {
+            for p in players.iter_mut() {
                 let command = to_task_command(current);
                 p.env.set_command(0, command);
                 // The observation the policy acts on next was taken before the change: give it
@@ -180,7 +253,7 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
             )
             .map_err(rec_err)?;
         }
-        for p in &mut players {
+        for p in players.iter_mut() {
             p.policy
                 .act_into(&p.obs, &mut p.means, &mut p.scratch)
                 .map_err(|e| anyhow::anyhow!("policy {}: {e}", p.entry.policy))?;
@@ -196,9 +269,9 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
             for text in ended {
                 rec.log("events", &TextLog::new(text)).map_err(rec_err)?;
             }
-            log_step(&rec, p)?;
+            log_step(rec, p)?;
         }
-        if args.realtime {
+        if realtime {
             let due = started + Duration::from_secs_f32((step + 1) as f32 * dt);
             if let Some(wait) = due.checked_duration_since(Instant::now()) {
                 std::thread::sleep(wait);
@@ -208,28 +281,15 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
             }
         }
     }
-    for p in &players {
-        let report = p.env.gait_report();
-        let text = summary_markdown(p, &report, args.seconds);
+    for p in players.iter() {
+        let text = summary_markdown(p, &p.env.gait_report(), seconds);
         rec.log_static(
             format!("summary/{}", p.entry.label),
-            &TextDocument::new(text.clone()).with_media_type(rerun::MediaType::markdown()),
+            &TextDocument::new(text).with_media_type(rerun::MediaType::markdown()),
         )
         .map_err(rec_err)?;
-        println!("{text}");
     }
-    rec.flush_blocking().map_err(rec_err)?;
-    if let Some(path) = &args.save {
-        println!(
-            "wrote {} ({steps} control steps); open it with rerun-sdk {} (`pip install \
-             rerun-sdk=={}`, then `rerun {}`)",
-            path.display(),
-            crate::play_cmd::RERUN_VERSION,
-            crate::play_cmd::RERUN_VERSION,
-            path.display()
-        );
-    }
-    Ok(())
+    Ok(steps)
 }
 
 fn to_task_command(c: VelocityCommand) -> Command {
@@ -591,4 +651,68 @@ fn summary_markdown(p: &Player, g: &GaitReport, seconds: f32) -> String {
         pw = g.mean_power,
         hd = g.heading_drift_rad.to_degrees(),
     )
+}
+
+/// `l3p train --rerun`: a training run's Rerun stream. Every metric of every iteration as
+/// `metrics/<name>` on the `iteration` timeline, and now and then a rollout of the latest policy
+/// with the `l3p play` layout ([`log_training_rollout`]).
+#[derive(Clone)]
+pub struct TrainStream {
+    rec: RecordingStream,
+}
+
+impl std::fmt::Debug for TrainStream {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("TrainStream")
+    }
+}
+
+impl TrainStream {
+    /// Streams to a viewer when `target` is a URL (`rerun+http://…`), else saves to the file
+    /// `target` (a `.rrd`).
+    pub fn open(run: &str, target: &str) -> anyhow::Result<Self> {
+        let app = rerun::ApplicationId::try_new(format!("l3p-train-{run}")).map_err(rec_err)?;
+        let builder = rerun::RecordingStreamBuilder::new(app);
+        let rec = if target.contains("://") {
+            builder.connect_grpc_opts(target.to_string())
+        } else {
+            builder.save(target)
+        }
+        .map_err(rec_err)?;
+        Ok(Self { rec })
+    }
+
+    /// Logs one metrics record's finite values at its iteration.
+    pub fn log_metrics(
+        &self,
+        iteration: u64,
+        values: &std::collections::BTreeMap<String, f64>,
+    ) -> anyhow::Result<()> {
+        self.rec.set_time_sequence("iteration", iteration as i64);
+        for (name, v) in values.iter().filter(|(_, v)| v.is_finite()) {
+            let path: Vec<String> = name.split('/').map(sanitize).collect();
+            self.rec
+                .log(format!("metrics/{}", path.join("/")), &Scalars::single(*v))
+                .map_err(rec_err)?;
+        }
+        Ok(())
+    }
+
+    /// A rollout of `policy` (see [`log_training_rollout`]).
+    pub fn log_rollout(
+        &self,
+        env: &l3p_robots::config::EnvConfig,
+        robot: &str,
+        policy: DeployPolicy,
+        iteration: u64,
+        command: VelocityCommand,
+        seconds: f32,
+    ) -> anyhow::Result<()> {
+        log_training_rollout(&self.rec, env, robot, policy, iteration, command, seconds)
+    }
+
+    /// Waits until everything logged has reached the viewer or the file.
+    pub fn flush(&self) -> anyhow::Result<()> {
+        self.rec.flush_blocking().map_err(rec_err)
+    }
 }

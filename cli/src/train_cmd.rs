@@ -52,7 +52,69 @@ pub struct TrainingFlags {
     /// Iterations between walk evaluations (with --until-walks).
     #[arg(long, default_value_t = 25)]
     pub eval_every: u64,
+    /// Iterations between quick walk screens (with --until-walks; 0: none): 8 episodes of 5 s at
+    /// 1.0 m/s whose xy error within 0.25 m/s starts a full walk check at once, so a policy that
+    /// walks between two --eval-every checks is found within a few iterations (every screen is
+    /// appended to `<run_dir>/walk_screens.jsonl`). A screen never decides: only a full check does.
+    #[arg(long, default_value_t = 5)]
+    pub screen_every: u64,
+    /// Stream the run to Rerun: a viewer's URL (no value: a local `rerun`) or a `.rrd` file to
+    /// write. Every metric of every iteration as `metrics/<name>` on the `iteration` timeline, and
+    /// every --rerun-every iterations a 5 s rollout of the latest checkpoint at 1.0 m/s with `l3p
+    /// play`'s entities (each rollout replaces the last; open the file with rerun-sdk 0.36.3).
+    #[arg(long, num_args = 0..=1, default_missing_value = crate::play_cmd::DEFAULT_VIEWER_URL)]
+    pub rerun: Option<String>,
+    /// Iterations between the rollouts of --rerun.
+    #[arg(long, default_value_t = 50)]
+    pub rerun_every: u64,
 }
+
+/// `--rerun`'s stream; without the `rerun` feature a stand-in that refuses to open.
+#[cfg(feature = "rerun")]
+use crate::play_rerun::TrainStream;
+
+/// Never constructed: `open` refuses (a struct, not an empty enum, so that the code using a stream
+/// is not dead code in this build).
+#[cfg(not(feature = "rerun"))]
+#[derive(Debug, Clone)]
+struct TrainStream {
+    _unconstructible: (),
+}
+
+#[cfg(not(feature = "rerun"))]
+impl TrainStream {
+    fn open(_run: &str, _target: &str) -> anyhow::Result<Self> {
+        anyhow::bail!(
+            "--rerun needs an l3p built with the `rerun` feature\nhint: cargo build --release -p \
+             l3p-cli (it is on by default)"
+        )
+    }
+    fn log_metrics(
+        &self,
+        _iteration: u64,
+        _values: &std::collections::BTreeMap<String, f64>,
+    ) -> anyhow::Result<()> {
+        Ok(())
+    }
+    fn log_rollout(
+        &self,
+        _env: &l3p_robots::config::EnvConfig,
+        _robot: &str,
+        _policy: l3p_policy::DeployPolicy,
+        _iteration: u64,
+        _command: crate::play_cmd::VelocityCommand,
+        _seconds: f32,
+    ) -> anyhow::Result<()> {
+        Ok(())
+    }
+    fn flush(&self) -> anyhow::Result<()> {
+        Ok(())
+    }
+}
+
+/// Simulated seconds and forward speed (m/s) of a `--rerun` rollout.
+const RERUN_ROLLOUT_S: f32 = 5.0;
+const RERUN_ROLLOUT_SPEED: f32 = 1.0;
 
 /// Envs (and finished episodes, one 20 s episode each) per speed of a walk check.
 const WALK_CHECK_ENVS: usize = 16;
@@ -60,6 +122,17 @@ const WALK_CHECK_ENVS: usize = 16;
 const WALK_CHECK_SPEEDS: [f32; 2] = [0.5, 1.0];
 /// Seed of the walk checks' simulations (the same every check, so checks compare policies).
 const WALK_CHECK_SEED: u64 = 11;
+
+/// Envs (and 5 s episodes) of a walk screen.
+const SCREEN_ENVS: usize = 8;
+/// Episode length of a walk screen (s): a quarter of a check's 20 s at half its envs.
+const SCREEN_EPISODE_S: f32 = 5.0;
+/// Forward speed of a walk screen (m/s): the speed every failing check so far failed at.
+const SCREEN_SPEED: f32 = 1.0;
+/// A screen with at most this xy tracking error (m/s) and no fall starts a full check. Looser than
+/// the criterion's 0.2: a 5 s episode counts the start from standstill at a quarter of the weight of
+/// a 20 s one, and a screen that misses a walking policy only delays it to the next check.
+const SCREEN_XY_ERROR: f32 = 0.25;
 
 /// One walk evaluation of a checkpoint during `--until-walks`.
 struct WalkCheck {
@@ -71,23 +144,7 @@ struct WalkCheck {
 /// criterion: forward 0.5 and 1.0 m/s, joint damping pinned at the top of the training range,
 /// pushes off, the rest of the training randomisation on.
 fn walk_check(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<WalkCheck> {
-    let ckpt =
-        l3p_policy::load_checkpoint(&daemon::checkpoint_path(run_dir), &l3p_policy::cpu_device())?;
-    let robot_name = config
-        .actors
-        .first()
-        .map(|a| a.robot.clone())
-        .ok_or_else(|| anyhow::anyhow!("no [[actors]] in the config"))?;
-    let robot = l3p_robots::catalog::RobotSpec::by_name(&robot_name)?;
-    let (bytes, _) = l3p_policy::export_bytes(&ckpt.model, robot.name)?;
-    let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
-    let mut env = config.env.clone();
-    let top_damping = env.randomization(robot.name).joint_damping[1];
-    crate::eval_cmd::PhysicsPins {
-        joint_damping: Some(top_damping),
-        ..Default::default()
-    }
-    .apply(&mut env);
+    let (iteration, robot, policy, env) = walk_setup(config, run_dir)?;
     let mut rows = Vec::new();
     // The harder speed first: while it fails (most checks) the other is not run, which halves a
     // failing check's cost — checks share the training's cores (BENCHMARKS.md "session 10").
@@ -112,9 +169,112 @@ fn walk_check(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<Walk
         )?);
     }
     rows.reverse();
-    Ok(WalkCheck {
-        iteration: ckpt.iteration,
-        rows,
+    Ok(WalkCheck { iteration, rows })
+}
+
+/// The latest checkpoint's iteration and deployable policy, its robot (the first actor's) and the
+/// walk criterion's environment: joint damping pinned at the top of the training range, pushes
+/// off, the rest of the training randomisation on.
+fn walk_setup(
+    config: &Config,
+    run_dir: &std::path::Path,
+) -> anyhow::Result<(
+    u64,
+    &'static l3p_robots::catalog::RobotSpec,
+    l3p_policy::DeployPolicy,
+    l3p_robots::config::EnvConfig,
+)> {
+    let (iteration, robot, policy) = latest_policy(config, run_dir)?;
+    let mut env = config.env.clone();
+    let top_damping = env.randomization(robot.name).joint_damping[1];
+    crate::eval_cmd::PhysicsPins {
+        joint_damping: Some(top_damping),
+        ..Default::default()
+    }
+    .apply(&mut env);
+    Ok((iteration, robot, policy, env))
+}
+
+/// The latest checkpoint's iteration, its first actor's robot and its deployable policy for it.
+fn latest_policy(
+    config: &Config,
+    run_dir: &std::path::Path,
+) -> anyhow::Result<(
+    u64,
+    &'static l3p_robots::catalog::RobotSpec,
+    l3p_policy::DeployPolicy,
+)> {
+    let ckpt =
+        l3p_policy::load_checkpoint(&daemon::checkpoint_path(run_dir), &l3p_policy::cpu_device())?;
+    let robot_name = config
+        .actors
+        .first()
+        .map(|a| a.robot.clone())
+        .ok_or_else(|| anyhow::anyhow!("no [[actors]] in the config"))?;
+    let robot = l3p_robots::catalog::RobotSpec::by_name(&robot_name)?;
+    let (bytes, _) = l3p_policy::export_bytes(&ckpt.model, robot.name)?;
+    Ok((
+        ckpt.iteration,
+        robot,
+        l3p_policy::DeployPolicy::from_bytes(&bytes)?,
+    ))
+}
+
+/// Logs a rollout of the latest checkpoint into the `--rerun` stream.
+fn rerun_rollout(
+    stream: &TrainStream,
+    config: &Config,
+    run_dir: &std::path::Path,
+) -> anyhow::Result<()> {
+    let (iteration, robot, policy) = latest_policy(config, run_dir)?;
+    let command = crate::play_cmd::VelocityCommand {
+        vx: RERUN_ROLLOUT_SPEED,
+        vy: 0.0,
+        wz: 0.0,
+    };
+    stream.log_rollout(
+        &config.env,
+        robot.name,
+        policy,
+        iteration,
+        command,
+        RERUN_ROLLOUT_S,
+    )
+}
+
+/// A quick walk screen of the latest checkpoint: [`SCREEN_ENVS`] episodes of [`SCREEN_EPISODE_S`]
+/// at [`SCREEN_SPEED`] under the walk check's conditions.
+struct WalkScreen {
+    iteration: u64,
+    lin_vel_error: f32,
+    fall_fraction: f32,
+}
+
+impl WalkScreen {
+    /// Whether this screen warrants a full walk check now.
+    fn promising(&self) -> bool {
+        self.lin_vel_error <= SCREEN_XY_ERROR && self.fall_fraction == 0.0
+    }
+}
+
+fn walk_screen(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<WalkScreen> {
+    let (iteration, robot, policy, mut env) = walk_setup(config, run_dir)?;
+    env.episode_length_s = SCREEN_EPISODE_S;
+    crate::eval_cmd::constant_forward_command(&mut env, SCREEN_SPEED);
+    let row = crate::eval_cmd::evaluate_row(
+        robot,
+        &env,
+        &policy,
+        SCREEN_ENVS,
+        SCREEN_ENVS,
+        WALK_CHECK_SEED,
+        Some(SCREEN_SPEED),
+        None,
+    )?;
+    Ok(WalkScreen {
+        iteration,
+        lin_vel_error: row.summary.lin_vel_error,
+        fall_fraction: row.summary.fall_fraction,
     })
 }
 
@@ -149,12 +309,23 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     if let Some(envs) = args.envs {
         config.actors.iter_mut().for_each(|a| a.envs = envs);
     }
+    // Walk checks and --rerun rollouts play the latest checkpoint: write one at least as often as
+    // they come, or they replay an old policy.
+    let mut every = u64::MAX;
     if args.flags.until_walks {
-        // A walk check plays the latest checkpoint: write one at least as often as the checks
-        // come, or a check re-evaluates an old policy.
-        let every = args.flags.eval_every.max(1);
-        config.learner.checkpoint_every = config.learner.checkpoint_every.clamp(1, every);
+        every = every.min(args.flags.eval_every.max(1));
+        if args.flags.screen_every > 0 {
+            every = every.min(args.flags.screen_every);
+        }
     }
+    if args.flags.rerun.is_some() {
+        every = every.min(args.flags.rerun_every.max(1));
+    }
+    config.learner.checkpoint_every = config.learner.checkpoint_every.clamp(1, every);
+    let stream = match &args.flags.rerun {
+        Some(target) => Some(TrainStream::open(&config.run.name, target)?),
+        None => None,
+    };
     l3p_proto::keys::validate_segment("run", &config.run.name)?;
     let opts = learner_cmd::learner_options(&config, true)?;
     let run_dir = opts.run_dir.clone();
@@ -234,9 +405,38 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
             .map(|a| (a.envs as u64) * config.rollout.steps_per_env as u64)
             .sum();
         let mut walk_task: Option<tokio::task::JoinHandle<anyhow::Result<WalkCheck>>> = None;
-        let mut last_walk_eval = 0u64;
+        let mut screen_task: Option<tokio::task::JoinHandle<anyhow::Result<WalkScreen>>> = None;
+        let (mut last_walk_eval, mut last_screen, mut latest_iteration) = (0u64, 0u64, 0u64);
         let mut walked: Option<(WalkCheck, f64)> = None;
+        let mut rollout_task: Option<tokio::task::JoinHandle<anyhow::Result<()>>> = None;
+        let mut last_rollout = 0u64;
         loop {
+            if rollout_task.as_ref().is_some_and(|t| t.is_finished())
+                && let Some(t) = rollout_task.take()
+            {
+                match t.await {
+                    Ok(Ok(())) => {}
+                    Ok(Err(e)) => warn!("rerun rollout failed: {e:#}"),
+                    Err(e) => warn!("rerun rollout panicked: {e}"),
+                }
+            }
+            if screen_task.as_ref().is_some_and(|t| t.is_finished())
+                && let Some(t) = screen_task.take()
+            {
+                match t.await {
+                    Ok(Ok(screen)) => {
+                        record_walk_screen(&screen, started.elapsed().as_secs_f64(), &run_dir);
+                        // A promising screen brings the next full check forward to now.
+                        if screen.promising() && walk_task.is_none() && !cancel.is_cancelled() {
+                            last_walk_eval = latest_iteration;
+                            let (cfg, dir) = (config.clone(), run_dir.clone());
+                            walk_task = Some(tokio::task::spawn_blocking(move || walk_check(&cfg, &dir)));
+                        }
+                    }
+                    Ok(Err(e)) => warn!("walk screen failed: {e:#}"),
+                    Err(e) => warn!("walk screen panicked: {e}"),
+                }
+            }
             if walk_task.as_ref().is_some_and(|t| t.is_finished())
                 && let Some(t) = walk_task.take()
             {
@@ -263,13 +463,37 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                             v("terrain_level"), v("lin_vel_error"),
                         );
                         bar.set_position(r.iteration);
+                        latest_iteration = r.iteration;
+                        if let Some(stream) = &stream {
+                            if let Err(e) = stream.log_metrics(r.iteration, &r.metrics.values) {
+                                warn!("rerun: {e:#}");
+                            }
+                            if rollout_task.is_none()
+                                && r.iteration >= last_rollout + args.flags.rerun_every.max(1)
+                            {
+                                last_rollout = r.iteration;
+                                let (s, cfg, dir) = (stream.clone(), config.clone(), run_dir.clone());
+                                rollout_task = Some(tokio::task::spawn_blocking(move || rerun_rollout(&s, &cfg, &dir)));
+                            }
+                        }
+                        let (checking, screening) = (walk_task.is_some(), screen_task.is_some());
                         if args.flags.until_walks
-                            && walk_task.is_none()
+                            && !checking
                             && r.iteration >= last_walk_eval + args.flags.eval_every.max(1)
                         {
                             last_walk_eval = r.iteration;
+                            last_screen = r.iteration;
                             let (cfg, dir) = (config.clone(), run_dir.clone());
                             walk_task = Some(tokio::task::spawn_blocking(move || walk_check(&cfg, &dir)));
+                        } else if args.flags.until_walks
+                            && args.flags.screen_every > 0
+                            && !checking
+                            && !screening
+                            && r.iteration >= last_screen + args.flags.screen_every
+                        {
+                            last_screen = r.iteration;
+                            let (cfg, dir) = (config.clone(), run_dir.clone());
+                            screen_task = Some(tokio::task::spawn_blocking(move || walk_screen(&cfg, &dir)));
                         }
                         if args.flags.quiet { info!(iteration = r.iteration, "{msg}"); } else { bar.set_message(msg); }
                     }
@@ -309,8 +533,27 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                 Err(e) => warn!("walk check panicked: {e}"),
             }
         }
+        if let Some(t) = screen_task.take() {
+            match t.await {
+                Ok(Ok(screen)) => {
+                    record_walk_screen(&screen, started.elapsed().as_secs_f64(), &run_dir)
+                }
+                Ok(Err(e)) => warn!("walk screen failed: {e:#}"),
+                Err(e) => warn!("walk screen panicked: {e}"),
+            }
+        }
         if args.flags.until_walks {
             report_walk(&run_dir, walked.as_ref(), samples_per_iteration)?;
+        }
+        if let Some(t) = rollout_task.take() {
+            match t.await {
+                Ok(Ok(())) => {}
+                Ok(Err(e)) => warn!("rerun rollout failed: {e:#}"),
+                Err(e) => warn!("rerun rollout panicked: {e}"),
+            }
+        }
+        if let Some(stream) = &stream {
+            stream.flush()?;
         }
         for actor in &mut actors {
             let _ = actor.child.kill();
@@ -354,6 +597,30 @@ fn record_walk_check(check: &WalkCheck, wall_seconds: f64, run_dir: &std::path::
         warn!("cannot record the walk check: {e}");
     }
     fails == 0 && check.rows.len() == WALK_CHECK_SPEEDS.len()
+}
+
+/// Logs a walk screen and appends it to `<run_dir>/walk_screens.jsonl`.
+fn record_walk_screen(screen: &WalkScreen, wall_seconds: f64, run_dir: &std::path::Path) {
+    info!(
+        iteration = screen.iteration,
+        xy_error = screen.lin_vel_error,
+        falls = screen.fall_fraction,
+        promising = screen.promising(),
+        "walk screen"
+    );
+    let line = serde_json::json!({
+        "iteration": screen.iteration,
+        "wall_seconds": wall_seconds,
+        "forward": SCREEN_SPEED,
+        "episode_s": SCREEN_EPISODE_S,
+        "episodes": SCREEN_ENVS,
+        "lin_vel_error": screen.lin_vel_error,
+        "fall_fraction": screen.fall_fraction,
+        "promising": screen.promising(),
+    });
+    if let Err(e) = append_line(&run_dir.join("walk_screens.jsonl"), &line.to_string()) {
+        warn!("cannot record the walk screen: {e}");
+    }
 }
 
 /// Prints and writes `<run_dir>/walk.json` for `--until-walks`.

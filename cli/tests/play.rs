@@ -9,12 +9,20 @@ use std::process::Command;
 
 use rerun::external::re_chunk_store::{ChunkStore, ChunkStoreConfig};
 
+mod common;
+use common::TINY_FLAT_TASK;
+
 fn policy() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session7/policy")
 }
 
 /// Per entity: rows on the `step` timeline, and whether it has static data.
 fn read_rrd(path: &Path) -> BTreeMap<String, (usize, bool)> {
+    read_rrd_on(path, "step")
+}
+
+/// Per entity: rows on `timeline`, and whether it has static data.
+fn read_rrd_on(path: &Path, timeline: &str) -> BTreeMap<String, (usize, bool)> {
     let mut file = std::fs::File::open(path).unwrap();
     let stores = ChunkStore::from_rrd_reader(&ChunkStoreConfig::default(), &mut file)
         .expect("the pinned SDK decodes the recording");
@@ -22,7 +30,7 @@ fn read_rrd(path: &Path) -> BTreeMap<String, (usize, bool)> {
     for store in stores.values() {
         for chunk in store.iter_physical_chunks() {
             let entry = out.entry(chunk.entity_path().to_string()).or_default();
-            if chunk.timelines().keys().any(|t| t.as_str() == "step") {
+            if chunk.timelines().keys().any(|t| t.as_str() == timeline) {
                 entry.0 += chunk.num_rows();
             } else if chunk.is_static() {
                 entry.1 = true;
@@ -140,4 +148,55 @@ fn two_robots_side_by_side_and_bad_arguments_fail_before_simulating() {
             "{args:?}: {err}"
         );
     }
+}
+
+/// `l3p train --rerun <file>.rrd` writes every metric of every iteration on the `iteration`
+/// timeline and, every `--rerun-every` iterations, a 5 s rollout with `l3p play`'s entities.
+#[test]
+fn train_streams_metrics_and_rollouts_to_a_recording() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("run.toml");
+    std::fs::write(
+        &config,
+        format!("[run]\nname = \"watched\"\n{TINY_FLAT_TASK}")
+            + "[learner]\nmax_iterations = 4\n[rollout]\nsteps_per_env = 8\n[[actors]]\nrobot = \"a1\"\nenvs = 4\n",
+    )
+    .unwrap();
+    let rrd = dir.path().join("train.rrd");
+    let out = Command::new(env!("CARGO_BIN_EXE_l3p"))
+        .arg("train")
+        .arg(&config)
+        .arg("--data-dir")
+        .arg(dir.path().join("data"))
+        .args(["--quiet", "--rerun-every", "2", "--rerun"])
+        .arg(&rrd)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let by_iteration = read_rrd_on(&rrd, "iteration");
+    let rows = |m: &BTreeMap<String, (usize, bool)>, e: &str| m.get(e).map(|x| x.0).unwrap_or(0);
+    // One row per iteration for the learner's metrics, `a/b` names nested (no 2 s episode ends in
+    // 4 × 8 steps, so there are no episode metrics to see here).
+    for metric in [
+        "/metrics/samples_per_second",
+        "/metrics/update_seconds",
+        "/metrics/time/physics_seconds",
+    ] {
+        assert_eq!(rows(&by_iteration, metric), 4, "{metric}: {by_iteration:?}");
+    }
+    // A rollout from iteration 2 on (one still running when the next is due is not doubled, and
+    // the last is awaited when training stops), 250 control steps each, the trunk's pose every step.
+    let by_step = read_rrd(&rrd);
+    let trunk = rows(&by_step, "/world/a1/trunk");
+    assert!(trunk > 0 && trunk % 250 == 0, "{trunk} rows: {by_step:?}");
+    assert_eq!(rows(&by_step, "/plots/a1/velocity/vx_command"), trunk);
+    assert!(
+        by_step.get("/summary/a1").is_some_and(|x| x.1),
+        "{by_step:?}"
+    );
 }

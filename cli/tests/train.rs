@@ -258,6 +258,8 @@ envs = 4
         "--until-walks",
         "--eval-every",
         "2",
+        "--screen-every",
+        "1",
     ]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(
@@ -290,5 +292,18 @@ envs = 4
             rows[0]["gait"]["target_change_rms"].as_f64().is_some(),
             "{c}"
         );
+    }
+    // Between checks, quick screens at 1.0 m/s; a policy this young is far off the command, so no
+    // screen is promising (a promising one would start a full check at once).
+    let screens = std::fs::read_to_string(data.join("walks/walk_screens.jsonl")).unwrap();
+    let screens: Vec<serde_json::Value> = screens
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert!(!screens.is_empty(), "no walk screen recorded");
+    for s in &screens {
+        assert_eq!(s["forward"], 1.0, "{s}");
+        assert!(s["lin_vel_error"].as_f64().unwrap() > 0.25, "{s}");
+        assert_eq!(s["promising"], false, "{s}");
     }
 }
