@@ -395,7 +395,15 @@ pub fn arm_state(arm: &Arm) -> ArmState {
     if let Some(pid) = live_pid(arm) {
         return ArmState::Running { pid, iteration };
     }
-    let failure = std::fs::read_to_string(arm.data_dir().join("failed.json")).ok();
+    // `failed.json` is `{"arm", "error", "log"}`: the failure is its error message.
+    let failure = std::fs::read_to_string(arm.data_dir().join("failed.json"))
+        .ok()
+        .map(|text| {
+            serde_json::from_str::<serde_json::Value>(&text)
+                .ok()
+                .and_then(|v| v["error"].as_str().map(str::to_string))
+                .unwrap_or(text)
+        });
     if iteration == 0 && failure.is_none() {
         ArmState::Pending
     } else {

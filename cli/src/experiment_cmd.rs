@@ -19,6 +19,7 @@ use crate::experiment::{
     Arm, ArmDone, ArmResult, ArmState, ExperimentSpec, Stage, arm_config_path, arm_state, band,
     live_pid, markdown_table, plan, read_done,
 };
+use crate::runtime;
 
 #[derive(Debug, Args)]
 pub struct ExperimentArgs {
@@ -181,7 +182,24 @@ fn run_cmd(spec_path: &Path) -> anyhow::Result<()> {
     let mut settled = vec![false; arms.len()];
     let mut failed: Vec<String> = Vec::new();
     let mut running: Vec<Running> = Vec::new();
+    // Ctrl-C or SIGTERM: start nothing more, pass the signal on to the running trainers (a
+    // terminal's Ctrl-C reaches them already; a `kill` of this process alone does not), and leave
+    // their arms interrupted, to resume on the next run. Handled rather than left to the default
+    // action, which a process started in the background with SIGINT ignored would not get.
+    let signals = runtime::tokio_runtime()?;
+    let cancel = signals.block_on(async { runtime::cancel_on_signal() });
+    let mut forwarded = false;
     loop {
+        if cancel.is_cancelled() && !forwarded {
+            forwarded = true;
+            for r in &running {
+                // SIGTERM, not a second SIGINT: a trainer that got the terminal's Ctrl-C already
+                // would take a second one as "exit now", without its final checkpoint.
+                let _ = Command::new("kill")
+                    .args(["-TERM", &r.child.id().to_string()])
+                    .status();
+            }
+        }
         // Reap finished processes.
         let mut i = 0;
         while i < running.len() {
@@ -191,6 +209,16 @@ fn run_cmd(spec_path: &Path) -> anyhow::Result<()> {
                 let _ = std::fs::remove_file(arm.data_dir().join("running.pid"));
                 settled[r.arm] = true;
                 let wall = add_wall_seconds(arm, r.started.elapsed().as_secs_f64())?;
+                // Stopping: no evaluation either (it can take minutes); the next run resumes
+                // the training or evaluates what finished.
+                if cancel.is_cancelled() {
+                    let reached = crate::experiment::last_iteration(&arm.run_dir());
+                    println!(
+                        "arm {} stopped at iteration {reached}/{}; rerun to resume",
+                        arm.name, arm.iterations
+                    );
+                    continue;
+                }
                 match finish_arm(&spec, &arms, arm, status, wall) {
                     Ok(()) => println!("arm {} done", arm.name),
                     Err(e) => {
@@ -250,7 +278,13 @@ fn run_cmd(spec_path: &Path) -> anyhow::Result<()> {
                 waiting = true;
                 break;
             }
+            if cancel.is_cancelled() {
+                break;
+            }
             running.push(start_arm(&exe, &dir, arm, k)?);
+        }
+        if cancel.is_cancelled() && running.is_empty() {
+            break;
         }
         if running.is_empty() && !waiting {
             break;
@@ -259,6 +293,12 @@ fn run_cmd(spec_path: &Path) -> anyhow::Result<()> {
     }
     let done = arms.iter().filter(|a| read_done(a).is_some()).count();
     println!("{done}/{} arms done", arms.len());
+    if cancel.is_cancelled() {
+        anyhow::bail!(
+            "interrupted\nhint: rerun `l3p experiment run {}` to resume",
+            spec_path.display()
+        );
+    }
     if !failed.is_empty() {
         anyhow::bail!(
             "{} arms did not finish: {}\nhint: `l3p experiment status {}` shows where each stands; \

@@ -198,7 +198,95 @@ fn add(args: &AddArgs) -> anyhow::Result<()> {
         toml_path.display(),
         urdf_path.display()
     );
+    // The same robot for actors on other machines: a registry artifact they fetch by name.
+    let bundle = RobotBundle {
+        format: ROBOT_BUNDLE_FORMAT.into(),
+        name: name.clone(),
+        toml: d.to_toml(),
+        urdf_file,
+        urdf: std::fs::read_to_string(&urdf_path)
+            .with_context(|| format!("reading {}", urdf_path.display()))?,
+    };
+    let registry = l3p_registry::Registry::open(&args.data_dir)?;
+    let outcome = registry.put(
+        l3p_registry::PutRequest::new(
+            &robot_artifact(&name),
+            l3p_registry::ArtifactKind::Robot,
+            serde_json::to_vec(&bundle)?,
+        )
+        .robot(&name)
+        .producer("l3p robots add"),
+    )?;
+    println!(
+        "registry: {} (actors elsewhere fetch it with `l3p actor --robot {name}`)",
+        outcome.meta.reference()
+    );
     Ok(())
+}
+
+/// Registry name of an added robot's description.
+pub fn robot_artifact(name: &str) -> String {
+    format!("robot-{name}")
+}
+
+const ROBOT_BUNDLE_FORMAT: &str = "l3p-robot/1";
+
+/// What a robot artifact holds: the description file and its URDF, as `l3p robots add` wrote them.
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct RobotBundle {
+    format: String,
+    name: String,
+    toml: String,
+    urdf_file: String,
+    urdf: String,
+}
+
+/// Writes a robot artifact's files into `dir` (an added-robots directory) and registers the robot;
+/// refuses a bundle for another robot or of another format, and file names with a path in them.
+pub fn install_robot_artifact(
+    bytes: &[u8],
+    expected_name: &str,
+    dir: &Path,
+) -> anyhow::Result<&'static RobotSpec> {
+    let bundle: RobotBundle =
+        serde_json::from_slice(bytes).context("robot artifact is not an l3p robot bundle")?;
+    if bundle.format != ROBOT_BUNDLE_FORMAT {
+        anyhow::bail!(
+            "robot artifact has format `{}`, this l3p reads `{ROBOT_BUNDLE_FORMAT}`",
+            bundle.format
+        );
+    }
+    if bundle.name != expected_name {
+        anyhow::bail!(
+            "robot artifact describes `{}`, not `{expected_name}`",
+            bundle.name
+        );
+    }
+    let plain = |f: &str| {
+        !f.is_empty() && Path::new(f).file_name().is_some_and(|n| n == f) && !f.starts_with('.')
+    };
+    if !plain(&bundle.urdf_file) || l3p_robots::added::sanitize_name(&bundle.name) != bundle.name {
+        anyhow::bail!(
+            "robot artifact names files `{}` / `{}`: expected plain file names",
+            bundle.name,
+            bundle.urdf_file
+        );
+    }
+    // The description must name the bundled URDF: it is read relative to `dir`.
+    let named = toml::from_str::<toml::Value>(&bundle.toml)
+        .context("robot artifact's description is not TOML")?;
+    if named.get("urdf").and_then(|v| v.as_str()) != Some(bundle.urdf_file.as_str()) {
+        anyhow::bail!(
+            "robot artifact's description does not name its URDF `{}`",
+            bundle.urdf_file
+        );
+    }
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let toml_path = dir.join(format!("{}.toml", bundle.name));
+    l3p_policy::write_atomic(&dir.join(&bundle.urdf_file), bundle.urdf.as_bytes())?;
+    l3p_policy::write_atomic(&toml_path, bundle.toml.as_bytes())?;
+    let (desc, urdf) = l3p_robots::added::RobotDescription::load(&toml_path)?;
+    Ok(l3p_robots::added::register(&desc, urdf)?)
 }
 
 fn list() -> anyhow::Result<()> {

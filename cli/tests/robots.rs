@@ -7,7 +7,7 @@ use std::path::Path;
 use std::process::Command;
 
 mod common;
-use common::TINY_FLAT_TASK;
+use common::{Procs, TINY_FLAT_TASK, log_tails, wait_for_port};
 
 fn l3p(args: &[&str], cwd: &Path) -> (bool, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_l3p"))
@@ -164,4 +164,111 @@ fn transfer_fine_tunes_a_registry_checkpoint_on_an_added_robot_with_lineage() {
         cwd,
     );
     assert!(!ok && out.contains("checkpoint"), "{out}");
+}
+
+/// `l3p robots add` also stores the robot in the data directory's registry; an actor on another
+/// machine (another data directory, no robot files) that is asked for it fetches it from the
+/// registry over Zenoh and simulates it. A robot nobody added is a clear error naming both places.
+#[test]
+fn an_actor_elsewhere_fetches_an_added_robot_from_the_registry() {
+    let dir = tempfile::tempdir().unwrap();
+    let home = dir.path().join("home");
+    let far = dir.path().join("far");
+    std::fs::create_dir_all(&home).unwrap();
+    std::fs::create_dir_all(&far).unwrap();
+    let urdf = l3p_robots::catalog::RobotSpec::by_name("a1")
+        .unwrap()
+        .urdf
+        .replacen("name=\"a1\"", "name=\"Yard Dog\"", 1);
+    std::fs::write(home.join("yard_dog.urdf"), urdf).unwrap();
+    let (ok, out) = l3p(&["robots", "add", "yard_dog.urdf"], &home);
+    assert!(ok && out.contains("registry: robot-yard_dog@1"), "{out}");
+
+    let port = l3p_registry::net::free_loopback_port().unwrap();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let logs = dir.path();
+    let mut procs = Procs(Vec::new());
+    let data = home.join("l3p-data");
+    procs.spawn(
+        "registry",
+        &[
+            "registry",
+            "serve",
+            "--data",
+            data.to_str().unwrap(),
+            "--listen",
+            &endpoint,
+        ],
+        logs,
+    );
+    wait_for_port(
+        port,
+        std::time::Duration::from_secs(60),
+        "the registry",
+        logs,
+    );
+
+    let far_data = far.join("l3p-data");
+    let config = far.join("actor.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "[run]\nname = \"far\"\ndata_dir = \"{}\"\n{TINY_FLAT_TASK}",
+            far_data.display()
+        ),
+    )
+    .unwrap();
+    let actor_args = |robot: &'static str| {
+        vec![
+            "actor".to_string(),
+            "--config".into(),
+            config.to_str().unwrap().into(),
+            "--robot".into(),
+            robot.into(),
+            "--envs".into(),
+            "2".into(),
+            "--connect".into(),
+            endpoint.clone(),
+        ]
+    };
+    let args = actor_args("yard_dog");
+    procs.spawn(
+        "actor",
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+        logs,
+    );
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(120);
+    loop {
+        let log = std::fs::read_to_string(logs.join("actor.log")).unwrap_or_default();
+        if log.contains("waiting for a policy") {
+            assert!(log.contains("robot fetched from the registry"), "{log}");
+            break;
+        }
+        assert!(
+            std::time::Instant::now() < deadline,
+            "the actor never got ready{}",
+            log_tails(logs)
+        );
+        std::thread::sleep(std::time::Duration::from_millis(100));
+    }
+    procs.kill("actor");
+    let fetched = std::fs::read_to_string(far_data.join("robots/yard_dog.toml")).unwrap();
+    let added = std::fs::read_to_string(data.join("robots/yard_dog.toml")).unwrap();
+    assert_eq!(fetched, added);
+
+    let args = actor_args("yard_cat");
+    procs.spawn(
+        "stray",
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+        logs,
+    );
+    let status = procs
+        .wait_exit("stray", std::time::Duration::from_secs(120))
+        .expect("an actor for an unknown robot exits");
+    assert!(!status.success());
+    let log = std::fs::read_to_string(logs.join("stray.log")).unwrap();
+    assert!(
+        log.contains("yard_cat") && log.contains("robot-yard_cat@latest"),
+        "{log}"
+    );
 }

@@ -52,15 +52,19 @@ pub enum ArtifactKind {
     Checkpoint,
     /// What deployment loads: policy weights + config, no optimiser.
     Deploy,
+    /// A robot added with `l3p robots add`: its description (TOML) and URDF, so that actors on
+    /// other machines simulate the same robot.
+    Robot,
 }
 
 impl ArtifactKind {
-    pub const ALL: [ArtifactKind; 5] = [
+    pub const ALL: [ArtifactKind; 6] = [
         Self::Core,
         Self::Adapter,
         Self::Mlp,
         Self::Checkpoint,
         Self::Deploy,
+        Self::Robot,
     ];
 
     pub fn as_str(self) -> &'static str {
@@ -70,6 +74,7 @@ impl ArtifactKind {
             Self::Mlp => "mlp",
             Self::Checkpoint => "checkpoint",
             Self::Deploy => "deploy",
+            Self::Robot => "robot",
         }
     }
 }
@@ -89,7 +94,7 @@ impl FromStr for ArtifactKind {
             .find(|k| k.as_str() == s)
             .ok_or_else(|| RefError {
                 input: s.to_string(),
-                reason: "unknown artifact kind (expected core, adapter, mlp, checkpoint or deploy)"
+                reason: "unknown artifact kind (expected core, adapter, mlp, checkpoint, deploy or robot)"
                     .into(),
             })
     }
