@@ -91,12 +91,9 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
         Sink::Spawn => builder.spawn().map_err(rec_err)?,
     };
     send_layout(&rec, &players)?;
-    let steps = record(&rec, &mut players, &schedule, args.seconds, args.realtime)?;
-    for p in &players {
-        println!(
-            "{}",
-            summary_markdown(p, &p.env.gait_report(), args.seconds)
-        );
+    let (steps, summaries) = record(&rec, &mut players, &schedule, args.seconds, args.realtime)?;
+    for text in summaries {
+        println!("{text}");
     }
     rec.flush_blocking().map_err(rec_err)?;
     if let Some(path) = &args.save {
@@ -109,35 +106,6 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
             path.display()
         );
     }
-    Ok(())
-}
-
-/// A short rollout of `policy` on `robot` at a constant `command`, logged into `rec` (a training
-/// run's stream) with the `l3p play` entity layout, at `iteration` on the `iteration` timeline;
-/// each rollout overwrites the previous one's entities.
-pub fn log_training_rollout(
-    rec: &RecordingStream,
-    env: &l3p_robots::config::EnvConfig,
-    robot: &str,
-    policy: DeployPolicy,
-    iteration: u64,
-    command: VelocityCommand,
-    seconds: f32,
-) -> anyhow::Result<()> {
-    let entry = SceneEntry {
-        robot: robot.to_string(),
-        policy: format!("iteration {iteration}"),
-        label: sanitize(robot),
-    };
-    let mut players = build_players(env, vec![(entry, policy)], command, iteration)?;
-    rec.set_time_sequence("iteration", iteration as i64);
-    record(
-        rec,
-        &mut players,
-        &CommandSchedule::constant(command),
-        seconds,
-        false,
-    )?;
     Ok(())
 }
 
@@ -200,14 +168,15 @@ fn build_players(
 }
 
 /// Logs the scene's static parts, then plays `seconds` of `schedule` (on the `step` and
-/// `sim_time` timelines) and each player's gait summary; returns the control steps played.
+/// `sim_time` timelines) and each player's gait summary; returns the control steps played and the
+/// summaries (markdown).
 fn record(
     rec: &RecordingStream,
     players: &mut [Player],
     schedule: &CommandSchedule,
     seconds: f32,
     realtime: bool,
-) -> anyhow::Result<usize> {
+) -> anyhow::Result<(usize, Vec<String>)> {
     rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())
         .map_err(rec_err)?;
     let speed = |f: &dyn Fn(&VelocityCommand) -> f32| {
@@ -281,15 +250,17 @@ fn record(
             }
         }
     }
+    let mut summaries = Vec::with_capacity(players.len());
     for p in players.iter() {
         let text = summary_markdown(p, &p.env.gait_report(), seconds);
         rec.log_static(
             format!("summary/{}", p.entry.label),
-            &TextDocument::new(text).with_media_type(rerun::MediaType::markdown()),
+            &TextDocument::new(text.clone()).with_media_type(rerun::MediaType::markdown()),
         )
         .map_err(rec_err)?;
+        summaries.push(text);
     }
-    Ok(steps)
+    Ok((steps, summaries))
 }
 
 fn to_task_command(c: VelocityCommand) -> Command {
@@ -698,7 +669,9 @@ impl TrainStream {
         Ok(())
     }
 
-    /// A rollout of `policy` (see [`log_training_rollout`]).
+    /// A short rollout of `policy` on `robot` at a constant `command` with the `l3p play` entity
+    /// layout, at `iteration` on the `iteration` timeline; each rollout overwrites the previous
+    /// one's entities.
     pub fn log_rollout(
         &self,
         env: &l3p_robots::config::EnvConfig,
@@ -708,7 +681,16 @@ impl TrainStream {
         command: VelocityCommand,
         seconds: f32,
     ) -> anyhow::Result<()> {
-        log_training_rollout(&self.rec, env, robot, policy, iteration, command, seconds)
+        let entry = SceneEntry {
+            robot: robot.to_string(),
+            policy: format!("iteration {iteration}"),
+            label: sanitize(robot),
+        };
+        let mut players = build_players(env, vec![(entry, policy)], command, iteration)?;
+        self.rec.set_time_sequence("iteration", iteration as i64);
+        let schedule = CommandSchedule::constant(command);
+        record(&self.rec, &mut players, &schedule, seconds, false)?;
+        Ok(())
     }
 
     /// Waits until everything logged has reached the viewer or the file.

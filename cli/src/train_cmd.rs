@@ -411,45 +411,25 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         let mut rollout_task: Option<tokio::task::JoinHandle<anyhow::Result<()>>> = None;
         let mut last_rollout = 0u64;
         loop {
-            if rollout_task.as_ref().is_some_and(|t| t.is_finished())
-                && let Some(t) = rollout_task.take()
+            if let Some(t) = take_finished(&mut rollout_task) {
+                joined(t, "rerun rollout").await;
+            }
+            if let Some(t) = take_finished(&mut screen_task)
+                && let Some(screen) = joined(t, "walk screen").await
             {
-                match t.await {
-                    Ok(Ok(())) => {}
-                    Ok(Err(e)) => warn!("rerun rollout failed: {e:#}"),
-                    Err(e) => warn!("rerun rollout panicked: {e}"),
+                record_walk_screen(&screen, started.elapsed().as_secs_f64(), &run_dir);
+                // A promising screen brings the next full check forward to now.
+                if screen.promising() && walk_task.is_none() && !cancel.is_cancelled() {
+                    last_walk_eval = latest_iteration;
+                    walk_task = Some(spawn_walk(&config, &run_dir, walk_check));
                 }
             }
-            if screen_task.as_ref().is_some_and(|t| t.is_finished())
-                && let Some(t) = screen_task.take()
+            if let Some(t) = take_finished(&mut walk_task)
+                && let Some(check) = joined(t, "walk check").await
+                && record_walk_check(&check, started.elapsed().as_secs_f64(), &run_dir)
             {
-                match t.await {
-                    Ok(Ok(screen)) => {
-                        record_walk_screen(&screen, started.elapsed().as_secs_f64(), &run_dir);
-                        // A promising screen brings the next full check forward to now.
-                        if screen.promising() && walk_task.is_none() && !cancel.is_cancelled() {
-                            last_walk_eval = latest_iteration;
-                            let (cfg, dir) = (config.clone(), run_dir.clone());
-                            walk_task = Some(tokio::task::spawn_blocking(move || walk_check(&cfg, &dir)));
-                        }
-                    }
-                    Ok(Err(e)) => warn!("walk screen failed: {e:#}"),
-                    Err(e) => warn!("walk screen panicked: {e}"),
-                }
-            }
-            if walk_task.as_ref().is_some_and(|t| t.is_finished())
-                && let Some(t) = walk_task.take()
-            {
-                match t.await {
-                    Ok(Ok(check)) => {
-                        if record_walk_check(&check, started.elapsed().as_secs_f64(), &run_dir) {
-                            walked = Some((check, started.elapsed().as_secs_f64()));
-                            cancel.cancel();
-                        }
-                    }
-                    Ok(Err(e)) => warn!("walk check failed: {e:#}"),
-                    Err(e) => warn!("walk check panicked: {e}"),
-                }
+                walked = Some((check, started.elapsed().as_secs_f64()));
+                cancel.cancel();
             }
             tokio::select! {
                 _ = cancel.cancelled() => break,
@@ -483,8 +463,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                         {
                             last_walk_eval = r.iteration;
                             last_screen = r.iteration;
-                            let (cfg, dir) = (config.clone(), run_dir.clone());
-                            walk_task = Some(tokio::task::spawn_blocking(move || walk_check(&cfg, &dir)));
+                            walk_task = Some(spawn_walk(&config, &run_dir, walk_check));
                         } else if args.flags.until_walks
                             && args.flags.screen_every > 0
                             && !checking
@@ -492,8 +471,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                             && r.iteration >= last_screen + args.flags.screen_every
                         {
                             last_screen = r.iteration;
-                            let (cfg, dir) = (config.clone(), run_dir.clone());
-                            screen_task = Some(tokio::task::spawn_blocking(move || walk_screen(&cfg, &dir)));
+                            screen_task = Some(spawn_walk(&config, &run_dir, walk_screen));
                         }
                         if args.flags.quiet { info!(iteration = r.iteration, "{msg}"); } else { bar.set_message(msg); }
                     }
@@ -520,37 +498,23 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         bar.finish();
         let summary = learner.await??;
         // A check still running when training stopped is the last word on the last policies.
-        if let Some(t) = walk_task.take() {
-            match t.await {
-                Ok(Ok(check)) => {
-                    if record_walk_check(&check, started.elapsed().as_secs_f64(), &run_dir)
-                        && walked.is_none()
-                    {
-                        walked = Some((check, started.elapsed().as_secs_f64()));
-                    }
-                }
-                Ok(Err(e)) => warn!("walk check failed: {e:#}"),
-                Err(e) => warn!("walk check panicked: {e}"),
-            }
+        if let Some(t) = walk_task.take()
+            && let Some(check) = joined(t, "walk check").await
+            && record_walk_check(&check, started.elapsed().as_secs_f64(), &run_dir)
+            && walked.is_none()
+        {
+            walked = Some((check, started.elapsed().as_secs_f64()));
         }
-        if let Some(t) = screen_task.take() {
-            match t.await {
-                Ok(Ok(screen)) => {
-                    record_walk_screen(&screen, started.elapsed().as_secs_f64(), &run_dir)
-                }
-                Ok(Err(e)) => warn!("walk screen failed: {e:#}"),
-                Err(e) => warn!("walk screen panicked: {e}"),
-            }
+        if let Some(t) = screen_task.take()
+            && let Some(screen) = joined(t, "walk screen").await
+        {
+            record_walk_screen(&screen, started.elapsed().as_secs_f64(), &run_dir);
         }
         if args.flags.until_walks {
             report_walk(&run_dir, walked.as_ref(), samples_per_iteration)?;
         }
         if let Some(t) = rollout_task.take() {
-            match t.await {
-                Ok(Ok(())) => {}
-                Ok(Err(e)) => warn!("rerun rollout failed: {e:#}"),
-                Err(e) => warn!("rerun rollout panicked: {e}"),
-            }
+            joined(t, "rerun rollout").await;
         }
         if let Some(stream) = &stream {
             stream.flush()?;
@@ -597,6 +561,42 @@ fn record_walk_check(check: &WalkCheck, wall_seconds: f64, run_dir: &std::path::
         warn!("cannot record the walk check: {e}");
     }
     fails == 0 && check.rows.len() == WALK_CHECK_SPEEDS.len()
+}
+
+/// A walk check or screen of the latest checkpoint on a blocking thread.
+fn spawn_walk<T: Send + 'static>(
+    config: &Config,
+    run_dir: &std::path::Path,
+    evaluate: fn(&Config, &std::path::Path) -> anyhow::Result<T>,
+) -> tokio::task::JoinHandle<anyhow::Result<T>> {
+    let (config, run_dir) = (config.clone(), run_dir.to_path_buf());
+    tokio::task::spawn_blocking(move || evaluate(&config, &run_dir))
+}
+
+/// The task in `slot` if it has finished (leaving the slot empty), else `None`.
+fn take_finished<T>(
+    slot: &mut Option<tokio::task::JoinHandle<T>>,
+) -> Option<tokio::task::JoinHandle<T>> {
+    if slot.as_ref().is_some_and(|t| t.is_finished()) {
+        slot.take()
+    } else {
+        None
+    }
+}
+
+/// A background task's result; a failure or panic is logged as `what` and gives `None`.
+async fn joined<T>(task: tokio::task::JoinHandle<anyhow::Result<T>>, what: &str) -> Option<T> {
+    match task.await {
+        Ok(Ok(value)) => Some(value),
+        Ok(Err(e)) => {
+            warn!("{what} failed: {e:#}");
+            None
+        }
+        Err(e) => {
+            warn!("{what} panicked: {e}");
+            None
+        }
+    }
 }
 
 /// Logs a walk screen and appends it to `<run_dir>/walk_screens.jsonl`.
