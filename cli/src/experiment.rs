@@ -2,6 +2,10 @@
 //! [`plan`] into [`Arm`]s — each an ordinary `l3p train` run with its own config file — and the
 //! results of finished arms aggregate into [`ArmResult`]s and the paper-layout [`Table`].
 //!
+//! Beside the paper's grid, `[[variants]]` add named arms that change one thing — a core
+//! pretrained on several robots, other latent sizes, warm-started transfer heads — and appear in
+//! the report as `<method> [<variant>]` rows.
+//!
 //! Layout on disk (`<data_dir>/<name>/`): `arms/<arm>.toml` (the arm's full training config),
 //! `<arm>/` (its data directory: registry, `<arm>/` run directory with metrics and checkpoints),
 //! `<arm>/done.json` (written when the arm finished every iteration, with wall-clock and
@@ -12,8 +16,8 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use l3p_learner::Mode;
 use l3p_learner::report::ReportRow;
+use l3p_learner::{Mode, TransferHeads};
 use l3p_robots::config::TerrainPreset;
 use serde::{Deserialize, Serialize};
 
@@ -28,6 +32,72 @@ pub struct ExperimentSpec {
     pub targets: StageSpec,
     #[serde(default)]
     pub evaluation: EvaluationSpec,
+    /// Extra arms beside the paper's grid (`[[variants]]`).
+    #[serde(default)]
+    pub variants: Vec<VariantSpec>,
+}
+
+/// `[[variants]]`: named arms that change one thing against the main grid, run with every seed.
+///
+/// A variant that sets `pretrain_robots`, `pretrain_methods`, `d_h` or `d_z` pretrains its own
+/// cores (`pretrain-<variant>-<method>-s<seed>`) and its transfer arms start from them; otherwise
+/// its transfer arms start from the main pretraining arms. Target arms are
+/// `<robot>-<method>-<variant>-s<seed>`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct VariantSpec {
+    /// A single key segment, distinct from other variants.
+    pub name: String,
+    /// Target methods (none: the variant only pretrains, e.g. a latent-size ablation).
+    #[serde(default)]
+    pub methods: Vec<Mode>,
+    /// Target robots (default: `targets.robots`).
+    #[serde(default)]
+    pub robots: Option<Vec<String>>,
+    /// Robots of the variant's own pretraining: one core trained on all of them at once.
+    #[serde(default)]
+    pub pretrain_robots: Option<Vec<String>>,
+    /// Methods of the variant's own pretraining (default: those its transfer methods start from).
+    #[serde(default)]
+    pub pretrain_methods: Option<Vec<Mode>>,
+    /// Latent sizes of every network of the variant (default: the base config's).
+    #[serde(default)]
+    pub d_h: Option<usize>,
+    #[serde(default)]
+    pub d_z: Option<usize>,
+    /// Environments per actor of the variant's arms (default: the experiment's): e.g. to keep a
+    /// joint pretraining's samples per iteration equal to a single robot's.
+    #[serde(default)]
+    pub envs: Option<usize>,
+    /// How `l3p-transfer` target arms start (default: the base config's, normally `fresh`).
+    #[serde(default)]
+    pub transfer_heads: Option<TransferHeads>,
+}
+
+impl VariantSpec {
+    /// Whether the variant trains its own cores rather than transferring the main ones.
+    pub fn pretrains(&self) -> bool {
+        self.pretrain_robots.is_some()
+            || self.pretrain_methods.is_some()
+            || self.d_h.is_some()
+            || self.d_z.is_some()
+    }
+
+    /// Its own pretraining methods (empty when it does not pretrain).
+    pub fn own_pretrain_methods(&self) -> Vec<Mode> {
+        if !self.pretrains() {
+            return Vec::new();
+        }
+        self.pretrain_methods.clone().unwrap_or_else(|| {
+            let mut m: Vec<Mode> = self
+                .methods
+                .iter()
+                .filter_map(|m| transfer_source(*m))
+                .collect();
+            m.dedup();
+            m
+        })
+    }
 }
 
 /// `[experiment]`.
@@ -162,6 +232,15 @@ impl ExperimentSpec {
                 ));
             }
         }
+        let mut names: Vec<&str> = Vec::new();
+        for v in &self.variants {
+            self.validate_variant(v)
+                .map_err(|x| format!("variants.{}: {x}", v.name))?;
+            if names.contains(&v.name.as_str()) {
+                return Err(format!("variants: the name {} is used twice", v.name));
+            }
+            names.push(&v.name);
+        }
         let ev = &self.evaluation;
         if ev.episodes == 0 || ev.envs == 0 {
             return Err("evaluation.episodes and evaluation.envs must be >= 1".into());
@@ -171,6 +250,48 @@ impl ExperimentSpec {
                 "evaluation.forward {:?}: speeds must be finite",
                 ev.forward
             ));
+        }
+        Ok(())
+    }
+
+    fn validate_variant(&self, v: &VariantSpec) -> Result<(), String> {
+        l3p_proto::keys::validate_segment("name", &v.name).map_err(|x| x.to_string())?;
+        for r in v.robots.iter().chain(&v.pretrain_robots).flatten() {
+            l3p_robots::catalog::RobotSpec::by_name(r).map_err(|x| x.to_string())?;
+        }
+        if v.pretrain_robots.as_ref().is_some_and(|r| r.is_empty()) {
+            return Err("pretrain_robots is empty".into());
+        }
+        if v.d_h == Some(0) || v.d_z == Some(0) || v.envs == Some(0) {
+            return Err("d_h, d_z and envs must be >= 1".into());
+        }
+        let own = v.own_pretrain_methods();
+        for m in &own {
+            if !matches!(m, Mode::Mlp | Mode::L3p) {
+                return Err(format!(
+                    "pretrain_methods: {} is not a from-scratch method (mlp or l3p)",
+                    m.as_str()
+                ));
+            }
+        }
+        let available = if v.pretrains() {
+            &own
+        } else {
+            &self.pretrain.methods
+        };
+        for m in &v.methods {
+            if let Some(base) = transfer_source(*m)
+                && !available.contains(&base)
+            {
+                return Err(format!(
+                    "methods has {} but its pretraining has no {}",
+                    m.as_str(),
+                    base.as_str()
+                ));
+            }
+        }
+        if v.methods.is_empty() && own.is_empty() {
+            return Err("no arms: give methods, or pretraining (pretrain_robots, d_h, d_z)".into());
         }
         Ok(())
     }
@@ -201,9 +322,12 @@ pub enum Stage {
 /// One training run of the experiment.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Arm {
-    /// `pretrain-<method>-s<seed>` or `<robot>-<method>-s<seed>`; also the run name.
+    /// `pretrain-<method>-s<seed>` or `<robot>-<method>-s<seed>` (variants:
+    /// `pretrain-<variant>-<method>-s<seed>`, `<robot>-<method>-<variant>-s<seed>`); also the run name.
     pub name: String,
     pub stage: Stage,
+    /// The `[[variants]]` entry the arm belongs to (`None`: the main grid).
+    pub variant: Option<String>,
     pub robots: Vec<String>,
     pub method: Mode,
     pub seed: u64,
@@ -241,9 +365,23 @@ pub fn arm_config_path(dir: &Path, arm: &str) -> PathBuf {
     dir.join("arms").join(format!("{arm}.toml"))
 }
 
-/// Expands the spec into arms: pretraining arms first (`pretrain.methods × seeds`), then targets
-/// (`targets.robots × targets.methods × seeds`), each transfer arm depending on the pretraining
-/// arm of its architecture and seed.
+/// What one arm changes against the base config.
+struct ArmRecipe<'a> {
+    name: String,
+    stage: Stage,
+    variant: Option<&'a VariantSpec>,
+    robots: Vec<String>,
+    method: Mode,
+    seed: u64,
+    iterations: u64,
+    terrain: Option<TerrainPreset>,
+    depends_on: Option<String>,
+}
+
+/// Expands the spec into arms: the main grid's pretraining arms (`pretrain.methods × seeds`), its
+/// targets (`targets.robots × targets.methods × seeds`), then each variant in file order (its own
+/// pretraining, then its targets); each transfer arm depends on the pretraining arm of its
+/// architecture and seed.
 pub fn plan(spec: &ExperimentSpec, base: &Config) -> anyhow::Result<Vec<Arm>> {
     spec.validate().map_err(|e| anyhow::anyhow!(e))?;
     let first = base.actors.first();
@@ -254,78 +392,134 @@ pub fn plan(spec: &ExperimentSpec, base: &Config) -> anyhow::Result<Vec<Arm>> {
         .or(first.map(|a| a.threads))
         .unwrap_or(1);
     let dir = spec.dir();
-    let make = |name: String,
-                kind: Stage,
-                stage: &StageSpec,
-                robots: Vec<String>,
-                method: Mode,
-                seed: u64,
-                depends_on: Option<String>|
-     -> anyhow::Result<Arm> {
+    let make = |r: ArmRecipe| -> anyhow::Result<Arm> {
         let mut config = base.clone();
-        config.run.name = name.clone();
-        config.run.seed = seed;
-        config.run.data_dir = dir.join(&name);
-        config.ppo.mode = method;
-        config.learner.max_iterations = stage.iterations;
-        config.learner.init_from = depends_on
+        config.run.name = r.name.clone();
+        config.run.seed = r.seed;
+        config.run.data_dir = dir.join(&r.name);
+        config.ppo.mode = r.method;
+        config.learner.max_iterations = r.iterations;
+        config.learner.init_from = r
+            .depends_on
             .as_ref()
             .map(|p| final_checkpoint(&dir.join(p).join(p)));
-        if let Some(t) = stage.terrain {
+        if let Some(t) = r.terrain {
             config.env.terrain = l3p_robots::config::TerrainConfig::with_preset(t);
             config.env.height_scan = t != TerrainPreset::Flat;
         }
-        config.actors = robots
+        let mut arm_envs = envs;
+        if let Some(v) = r.variant {
+            config.model.d_h = v.d_h.unwrap_or(config.model.d_h);
+            config.model.d_z = v.d_z.unwrap_or(config.model.d_z);
+            config.ppo.transfer_heads = v.transfer_heads.unwrap_or(config.ppo.transfer_heads);
+            arm_envs = v.envs.unwrap_or(envs);
+        }
+        config.actors = r
+            .robots
             .iter()
-            .map(|r| ActorSpec {
-                robot: r.clone(),
-                envs,
+            .map(|robot| ActorSpec {
+                robot: robot.clone(),
+                envs: arm_envs,
                 threads,
             })
             .collect();
         config
             .validate()
-            .map_err(|e| anyhow::anyhow!("arm {name}: {e}"))?;
+            .map_err(|e| anyhow::anyhow!("arm {}: {e}", r.name))?;
         Ok(Arm {
-            name,
-            stage: kind,
-            robots,
-            method,
-            seed,
-            iterations: stage.iterations,
-            depends_on,
+            name: r.name,
+            stage: r.stage,
+            variant: r.variant.map(|v| v.name.clone()),
+            robots: r.robots,
+            method: r.method,
+            seed: r.seed,
+            iterations: r.iterations,
+            depends_on: r.depends_on,
             config,
         })
     };
-    let mut arms = Vec::new();
-    for &seed in &spec.experiment.seeds {
-        for &method in &spec.pretrain.methods {
-            arms.push(make(
+    let pretrain = |variant: Option<&'_ VariantSpec>, method: Mode, seed: u64| {
+        let (name, robots) = match variant {
+            Some(v) => (
+                format!("pretrain-{}-{}-s{seed}", v.name, method.as_str()),
+                v.pretrain_robots
+                    .clone()
+                    .unwrap_or_else(|| spec.pretrain.robots.clone()),
+            ),
+            None => (
                 pretrain_arm_name(method, seed),
-                Stage::Pretrain,
-                &spec.pretrain,
                 spec.pretrain.robots.clone(),
-                method,
-                seed,
-                None,
-            )?);
+            ),
+        };
+        make(ArmRecipe {
+            name,
+            stage: Stage::Pretrain,
+            variant,
+            robots,
+            method,
+            seed,
+            iterations: spec.pretrain.iterations,
+            terrain: spec.pretrain.terrain,
+            depends_on: None,
+        })
+    };
+    let target = |variant: Option<&'_ VariantSpec>, robot: &str, method: Mode, seed: u64| {
+        let suffix = variant.map(|v| format!("-{}", v.name)).unwrap_or_default();
+        let depends_on = transfer_source(method).map(|m| match variant {
+            Some(v) if v.pretrains() => format!("pretrain-{}-{}-s{seed}", v.name, m.as_str()),
+            _ => pretrain_arm_name(m, seed),
+        });
+        make(ArmRecipe {
+            name: format!(
+                "{}-{}{suffix}-s{seed}",
+                robot.replace('_', "-"),
+                method.as_str()
+            ),
+            stage: Stage::Target,
+            variant,
+            robots: vec![robot.to_string()],
+            method,
+            seed,
+            iterations: spec.targets.iterations,
+            terrain: spec.targets.terrain,
+            depends_on,
+        })
+    };
+    let seeds = &spec.experiment.seeds;
+    let mut arms = Vec::new();
+    for &seed in seeds {
+        for &method in &spec.pretrain.methods {
+            arms.push(pretrain(None, method, seed)?);
         }
     }
     for robot in &spec.targets.robots {
         for &method in &spec.targets.methods {
-            for &seed in &spec.experiment.seeds {
-                let depends_on = transfer_source(method).map(|m| pretrain_arm_name(m, seed));
-                arms.push(make(
-                    format!("{}-{}-s{seed}", robot.replace('_', "-"), method.as_str()),
-                    Stage::Target,
-                    &spec.targets,
-                    vec![robot.clone()],
-                    method,
-                    seed,
-                    depends_on,
-                )?);
+            for &seed in seeds {
+                arms.push(target(None, robot, method, seed)?);
             }
         }
+    }
+    for v in &spec.variants {
+        for &seed in seeds {
+            for method in v.own_pretrain_methods() {
+                arms.push(pretrain(Some(v), method, seed)?);
+            }
+        }
+        for robot in v.robots.as_ref().unwrap_or(&spec.targets.robots) {
+            for &method in &v.methods {
+                for &seed in seeds {
+                    arms.push(target(Some(v), robot, method, seed)?);
+                }
+            }
+        }
+    }
+    let mut names: Vec<&str> = arms.iter().map(|a| a.name.as_str()).collect();
+    names.sort_unstable();
+    if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+        anyhow::bail!(
+            "two arms are named {}\nhint: rename the variant that makes it",
+            w[0]
+        );
     }
     Ok(arms)
 }
@@ -429,6 +623,8 @@ pub fn last_iteration(run_dir: &Path) -> u64 {
 pub struct ArmResult {
     pub robot: String,
     pub method: Mode,
+    /// The `[[variants]]` entry (`None`: the main grid).
+    pub variant: Option<String>,
     pub seed: u64,
     pub row: ReportRow,
     pub wall_seconds: f64,
@@ -493,13 +689,29 @@ pub const PAPER_TABLE: &[(&str, &str, f64, f64, f64, f64, f64, f64)] = &[
     ("spot", "l3p-transfer", 412.0, 864.0, 3.74, 171.0, 217.0, 181.99),
 ];
 
-/// The result table: one row per (robot, method), mean ± std over seeds, the paper's reward
-/// convergence beside ours.
+impl ArmResult {
+    /// The method column: `l3p-transfer`, or `l3p-transfer [warm]` for a variant's arm.
+    pub fn method_label(&self) -> String {
+        method_label(self.method, self.variant.as_deref())
+    }
+}
+
+/// `<method>` or `<method> [<variant>]`.
+pub fn method_label(method: Mode, variant: Option<&str>) -> String {
+    match variant {
+        Some(v) => format!("{} [{v}]", method.as_str()),
+        None => method.as_str().to_string(),
+    }
+}
+
+/// The result table: one row per (robot, method or method [variant]), mean ± std over seeds, the
+/// paper's reward convergence beside ours (main grid only). A transfer row's "% of scratch" is
+/// against the main grid's from-scratch arms of the same robot and architecture.
 pub fn markdown_table(results: &[ArmResult]) -> String {
-    let mut groups: BTreeMap<(String, &'static str), Vec<&ArmResult>> = BTreeMap::new();
+    let mut groups: BTreeMap<(String, String), Vec<&ArmResult>> = BTreeMap::new();
     for r in results {
         groups
-            .entry((r.robot.clone(), r.method.as_str()))
+            .entry((r.robot.clone(), r.method_label()))
             .or_default()
             .push(r);
     }
@@ -527,18 +739,14 @@ pub fn markdown_table(results: &[ArmResult]) -> String {
     );
     let mean_final = |robot: &str, method: &str| -> Option<f64> {
         groups
-            .get(&(robot.to_string(), method))
+            .get(&(robot.to_string(), method.to_string()))
             .and_then(|rs| mean_std(&rs.iter().map(|r| r.row.final_reward).collect::<Vec<_>>()))
             .map(|(m, _)| m)
     };
     for ((robot, method), rs) in &groups {
         let col = |f: &dyn Fn(&ArmResult) -> f64| -> Vec<f64> { rs.iter().map(|r| f(r)).collect() };
         // A transferred policy's final reward as a share of the same architecture from scratch.
-        let scratch = match *method {
-            "mlp-transfer" => Some("mlp"),
-            "l3p-transfer" => Some("l3p"),
-            _ => None,
-        };
+        let scratch = transfer_source(rs[0].method).map(Mode::as_str);
         let share = match (
             scratch.and_then(|m| mean_final(robot, m)),
             mean_final(robot, method),
@@ -550,7 +758,7 @@ pub fn markdown_table(results: &[ArmResult]) -> String {
         let level = |text: String| if levels { text } else { "— (flat)".into() };
         let paper = PAPER_TABLE
             .iter()
-            .find(|p| p.0 == robot && p.1 == *method)
+            .find(|p| p.0 == robot && p.1 == method)
             .map(|p| format!("{:.0} / {:.0}", p.5, p.6))
             .unwrap_or_else(|| "—".into());
         let zero: Vec<f64> = rs.iter().filter_map(|r| r.zero_shot_return).collect();
@@ -686,6 +894,134 @@ terrain = "flat"
         }
     }
 
+    const VARIANTS: &str = r#"
+[[variants]]
+name = "warm"
+methods = ["l3p-transfer"]
+robots = ["go1"]
+transfer_heads = "prototype"
+
+[[variants]]
+name = "joint"
+methods = ["l3p-transfer", "mlp-transfer"]
+robots = ["anymal_c"]
+pretrain_robots = ["a1", "go1"]
+envs = 4
+
+[[variants]]
+name = "dz2"
+pretrain_methods = ["l3p"]
+d_z = 2
+"#;
+
+    #[test]
+    fn variants_add_their_own_arms_and_pretrain_only_when_they_change_the_core() {
+        let text = format!("{MICRO}{VARIANTS}");
+        let arms = plan(&spec(&text), &base()).unwrap();
+        let main = plan(&spec(MICRO), &base()).unwrap();
+        // The main grid comes first and is untouched; each variant's arms follow in file order.
+        assert_eq!(&arms[..main.len()], &main[..]);
+        // warm: 1 robot × 1 method × 2 seeds; joint: 2 pretraining methods × 2 seeds + 1 robot
+        // × 2 methods × 2 seeds; dz2: 1 pretraining method × 2 seeds.
+        assert_eq!(arms.len(), main.len() + 2 + (4 + 4) + 2);
+        let variants: Vec<&str> = arms[main.len()..]
+            .iter()
+            .map(|a| a.variant.as_deref().unwrap())
+            .collect();
+        let mut order = variants.clone();
+        order.dedup();
+        assert_eq!(order, ["warm", "joint", "dz2"]);
+        let joint: Vec<Stage> = arms[main.len()..]
+            .iter()
+            .filter(|a| a.variant.as_deref() == Some("joint"))
+            .map(|a| a.stage)
+            .collect();
+        assert!(joint.is_sorted_by_key(|s| *s == Stage::Target), "{joint:?}");
+
+        let warm = arms
+            .iter()
+            .find(|a| a.name == "go1-l3p-transfer-warm-s2")
+            .unwrap();
+        assert_eq!(warm.variant.as_deref(), Some("warm"));
+        assert_eq!(warm.depends_on.as_deref(), Some("pretrain-l3p-s2"));
+        assert_eq!(warm.config.ppo.transfer_heads, TransferHeads::Prototype);
+        let plain = arms
+            .iter()
+            .find(|a| a.name == "go1-l3p-transfer-s2")
+            .unwrap();
+        assert_eq!(plain.config.ppo.transfer_heads, TransferHeads::Fresh);
+
+        let joint = arms
+            .iter()
+            .find(|a| a.name == "pretrain-joint-mlp-s1")
+            .unwrap();
+        assert_eq!(joint.robots, ["a1", "go1"]);
+        assert_eq!(joint.config.actors.len(), 2);
+        assert!(joint.config.actors.iter().all(|a| a.envs == 4));
+        let t = arms
+            .iter()
+            .find(|a| a.name == "anymal-c-mlp-transfer-joint-s1")
+            .unwrap();
+        assert_eq!(t.depends_on.as_deref(), Some("pretrain-joint-mlp-s1"));
+        assert_eq!(t.config.actors[0].envs, 4);
+
+        let dz = arms
+            .iter()
+            .find(|a| a.name == "pretrain-dz2-l3p-s2")
+            .unwrap();
+        assert_eq!((dz.config.model.d_z, dz.config.model.d_h), (2, 64));
+        assert_eq!(dz.robots, ["a1"]);
+        assert!(
+            !arms
+                .iter()
+                .any(|a| a.name.contains("dz2") && a.stage == Stage::Target)
+        );
+    }
+
+    #[test]
+    fn bad_variants_are_refused() {
+        let cases = [
+            (
+                VARIANTS.replace(r#"name = "joint""#, r#"name = "warm""#),
+                "used twice",
+            ),
+            (
+                VARIANTS.replace(r#"robots = ["go1"]"#, r#"robots = ["go7"]"#),
+                "variants.warm",
+            ),
+            (
+                VARIANTS.replace("d_z = 2", "d_z = 0"),
+                "variants.dz2: d_h, d_z and envs",
+            ),
+            (
+                VARIANTS
+                    .replace(
+                        r#"pretrain_methods = ["l3p"]"#,
+                        r#"pretrain_methods = ["mlp"]"#,
+                    )
+                    .replace("d_z = 2", "d_z = 2\nmethods = [\"l3p-transfer\"]"),
+                "its pretraining has no l3p",
+            ),
+            (
+                VARIANTS.replace(r#"methods = ["l3p-transfer"]"#, "methods = []"),
+                "variants.warm: no arms",
+            ),
+        ];
+        for (variants, want) in cases {
+            let err = spec(&format!("{MICRO}{variants}")).validate().unwrap_err();
+            assert!(err.contains(want), "{want}: {err}");
+        }
+        // A variant whose arm names collide with the main grid's.
+        let clash = format!(
+            "{MICRO}\n[[variants]]\nname = \"transfer\"\nmethods = [\"l3p\"]\nd_h = 8\npretrain_methods = [\"l3p\"]\n"
+        );
+        let err = plan(&spec(&clash), &base()).unwrap_err().to_string();
+        assert!(
+            err.contains("two arms are named") && err.contains("-l3p-transfer-s1"),
+            "{err}"
+        );
+    }
+
     #[test]
     fn bad_specs_are_refused_with_the_key_named() {
         let cases = [
@@ -746,6 +1082,7 @@ terrain = "flat"
         ArmResult {
             robot: robot.into(),
             method,
+            variant: None,
             seed,
             row: ReportRow {
                 iterations: 100,
@@ -798,6 +1135,28 @@ terrain = "flat"
         assert!(
             with_scratch.contains("| 21.00 ± 0.00 | 150% |"),
             "{with_scratch}"
+        );
+        // A variant's transfer row: its own row, compared with the main grid's scratch arms, and
+        // no paper numbers (the paper has no such arm).
+        let mut warm = result("go1", Mode::L3pTransfer, 1, Some(30), 28.0);
+        warm.variant = Some("warm".into());
+        let with_variant = markdown_table(&[
+            warm,
+            result("go1", Mode::L3pTransfer, 1, Some(40), 21.0),
+            result("go1", Mode::L3p, 1, Some(90), 14.0),
+        ]);
+        let row = with_variant
+            .lines()
+            .find(|l| l.contains("l3p-transfer [warm]"))
+            .unwrap();
+        assert!(row.contains("| 28.00 ± 0.00 | 200% |"), "{row}");
+        assert!(row.ends_with("| — |"), "{row}");
+        assert_eq!(
+            with_variant
+                .lines()
+                .filter(|l| l.starts_with("| go1"))
+                .count(),
+            3
         );
     }
 }

@@ -482,6 +482,7 @@ fn collect_results(finished: &[Finished], window: usize) -> Vec<ArmResult> {
         out.push(ArmResult {
             robot,
             method: arm.method,
+            variant: arm.variant.clone(),
             seed: arm.seed,
             row: ReportRow::from_records(records, window),
             wall_seconds: done.wall_seconds,
@@ -503,6 +504,16 @@ fn collect_results(finished: &[Finished], window: usize) -> Vec<ArmResult> {
         });
     }
     out
+}
+
+/// The paper's column order of the methods.
+fn mode_order(m: l3p_learner::Mode) -> u8 {
+    match m {
+        l3p_learner::Mode::Mlp => 0,
+        l3p_learner::Mode::L3p => 1,
+        l3p_learner::Mode::MlpTransfer => 2,
+        l3p_learner::Mode::L3pTransfer => 3,
+    }
 }
 
 fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
@@ -549,24 +560,33 @@ fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
             if key == "terrain_level" && !levels {
                 continue;
             }
+            // Every (method, variant) present for this robot, the main grid's methods first.
+            let mut kinds: Vec<(l3p_learner::Mode, Option<String>)> = finished
+                .iter()
+                .filter(|f| f.arm.robots.join("+") == *robot)
+                .map(|f| (f.arm.method, f.arm.variant.clone()))
+                .collect();
+            kinds.sort_by_key(|(m, v)| (v.clone(), mode_order(*m)));
+            kinds.dedup();
             let mut lines = Vec::new();
-            for method in [
-                l3p_learner::Mode::Mlp,
-                l3p_learner::Mode::L3p,
-                l3p_learner::Mode::MlpTransfer,
-                l3p_learner::Mode::L3pTransfer,
-            ] {
+            for (method, variant) in kinds {
                 let curves: Vec<Vec<(f64, f64)>> = finished
                     .iter()
-                    .filter(|f| f.arm.robots.join("+") == *robot && f.arm.method == method)
+                    .filter(|f| {
+                        f.arm.robots.join("+") == *robot
+                            && f.arm.method == method
+                            && f.arm.variant == variant
+                    })
                     .map(|f| smooth(&series(&f.records, key), window))
                     .collect();
-                if !curves.is_empty() {
-                    lines.push((
-                        format!("{} ({} seeds)", method.as_str(), curves.len()),
-                        band(&curves),
-                    ));
-                }
+                lines.push((
+                    format!(
+                        "{} ({} seeds)",
+                        crate::experiment::method_label(method, variant.as_deref()),
+                        curves.len()
+                    ),
+                    band(&curves),
+                ));
             }
             if lines.is_empty() {
                 continue;

@@ -1,6 +1,7 @@
 //! `l3p experiment` end to end through real processes: a micro-experiment (A1 pretraining, two
 //! target robots × {l3p, l3p-transfer}, one seed) interrupted mid-arm with Ctrl-C, resumed, finished,
-//! reported; a finished experiment reruns without touching its arms.
+//! reported; a finished experiment reruns without touching its arms. One `[[variants]]` arm (a
+//! warm-started transfer) rides along.
 
 #![cfg(target_os = "linux")]
 
@@ -69,6 +70,11 @@ iterations = 3
 episodes = 2
 envs = 2
 forward = [0.5]
+[[variants]]
+name = "warm"
+robots = ["go1"]
+methods = ["l3p-transfer"]
+transfer_heads = "prototype"
 "#;
 
 #[test]
@@ -81,11 +87,12 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
     let exp = cwd.join("data/micro");
     let pretrain_run = exp.join("pretrain-l3p-s1/pretrain-l3p-s1");
 
-    // The plan: one pretraining arm, then 2 robots × 2 methods, as `l3p train` invocations.
+    // The plan: one pretraining arm, then 2 robots × 2 methods, then the variant's warm-started
+    // transfer arm, as `l3p train` invocations.
     let out = l3p(&["experiment", "plan", "micro.toml"], cwd);
     let plan = text(&out);
     assert!(out.status.success(), "{plan}");
-    assert!(plan.contains("5 arms"), "{plan}");
+    assert!(plan.contains("6 arms"), "{plan}");
     assert!(
         plan.contains("l3p train data/micro/arms/pretrain-l3p-s1.toml --quiet"),
         "{plan}"
@@ -145,14 +152,14 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
         status_text.contains("interrupted at iteration"),
         "{status_text}"
     );
-    assert!(status_text.contains("0/5 arms done"), "{status_text}");
+    assert!(status_text.contains("0/6 arms done"), "{status_text}");
 
     // Rerun: the pretraining arm resumes from its checkpoint (iterations continue, none repeats),
     // then the targets train, the transfer arms from the pretrained core.
     let out = l3p(&["experiment", "run", "micro.toml"], cwd);
     let log = text(&out);
     assert!(out.status.success(), "{log}");
-    assert!(log.contains("5/5 arms done"), "{log}");
+    assert!(log.contains("6/6 arms done"), "{log}");
     let its = iterations(&pretrain_run);
     assert_eq!(
         its,
@@ -177,6 +184,8 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
         arm_config.contains("pretrain-l3p-s1/pretrain-l3p-s1/checkpoints/latest.ckpt"),
         "{arm_config}"
     );
+    let warm = std::fs::read_to_string(exp.join("arms/go1-l3p-transfer-warm-s1.toml")).unwrap();
+    assert!(warm.contains("transfer_heads = \"prototype\""), "{warm}");
 
     // A finished experiment reruns without touching its arms.
     let stamp = |arm: &str| {
@@ -198,6 +207,7 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
     for row in [
         "| a1 | l3p | 1 |",
         "| go1 | l3p-transfer | 1 |",
+        "| go1 | l3p-transfer [warm] | 1 |",
         "| spot | l3p | 1 |",
     ] {
         assert!(report.contains(row), "{row}: {report}");
@@ -205,6 +215,7 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
     assert!(exp.join("report/README.md").exists());
     let svg = std::fs::read_to_string(exp.join("report/go1-episode_return.svg")).unwrap();
     assert!(svg.contains("l3p-transfer (1 seeds)"), "{svg}");
+    assert!(svg.contains("l3p-transfer [warm] (1 seeds)"), "{svg}");
     assert!(exp.join("report/go1-episode_return.png").exists());
 }
 

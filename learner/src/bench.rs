@@ -135,7 +135,14 @@ fn bench_in_pool(cfg: &LearnerBenchConfig) -> Result<LearnerBenchReport, Learner
     };
     let spec = RobotSpec::new("bench", cfg.obs_dim, cfg.action_dim);
     let actor_params = policy.actor_params(cfg.obs_dim, cfg.action_dim);
-    let model = crate::init_model(ppo_cfg.mode, policy, vec![spec], None, &device)?;
+    let model = crate::init_model(
+        ppo_cfg.mode,
+        policy,
+        vec![spec],
+        None,
+        crate::TransferHeads::Fresh,
+        &device,
+    )?;
     let mut ppo = Ppo::new(ppo_cfg, model, device)?;
     let mut rng = StdRng::seed_from_u64(cfg.seed);
     let batch = synthetic_batch(cfg, &mut rng);

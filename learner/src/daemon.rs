@@ -221,6 +221,7 @@ fn load_or_init_ppo(
         opts.policy.clone(),
         opts.robots.clone(),
         init_from,
+        opts.ppo.transfer_heads,
         &device,
     )?;
     info!(mode = opts.ppo.mode.as_str(), "{}", model.param_report());

@@ -4,8 +4,9 @@
 //! # Public API (what the learner daemon calls)
 //! - [`PpoConfig`] (TOML section, rsl_rl defaults; [`Mode`] `mlp` | `l3p` | `mlp-transfer` |
 //!   `l3p-transfer`), [`l3p_policy::PolicyConfig`] for the networks.
-//! - [`init_model`]`(mode, policy_config, robots, init_from, &device)` builds the model a mode starts
-//!   from (fresh, or initialised/frozen from a checkpoint).
+//! - [`init_model`]`(mode, policy_config, robots, init_from, heads, &device)` builds the model a mode
+//!   starts from (fresh, or initialised/frozen from a checkpoint; [`TransferHeads`] says what robots
+//!   new to the checkpoint start with under `l3p-transfer`).
 //! - [`Ppo::new`]`(cfg, model, device)`; [`Ppo::update`]`(&RolloutBatch) -> UpdateMetrics`;
 //!   [`Ppo::export`]`(robot)` (deployable policy blob for actors/deploy, format `l3p-export-v1`);
 //!   [`Ppo::checkpoint_bytes`] / [`Ppo::from_checkpoint_bytes`] / [`Ppo::save`] / [`Ppo::load`]
@@ -38,7 +39,8 @@ pub mod uploader;
 
 pub use gae::{compute_gae, explained_variance, normalize};
 pub use ppo::{
-    Mirror, Mode, Ppo, PpoConfig, Schedule, UpdateMetrics, clip_global_grad_norm, param_ids,
+    Mirror, Mode, Ppo, PpoConfig, Schedule, TransferHeads, UpdateMetrics, clip_global_grad_norm,
+    param_ids,
 };
 pub use storage::{RobotRollout, RolloutBatch};
 
@@ -67,12 +69,14 @@ pub enum LearnerError {
 ///   checkpoint, or else those of the checkpoint's first robot (the prototype, e.g. A1) when the
 ///   dimensions match.
 /// - `l3p-transfer`: the core of an L3P checkpoint (frozen later by [`Ppo::new`]); robots present in
-///   the checkpoint keep their adapters (terrain transfer), new robots get fresh adapters.
+///   the checkpoint keep their adapters (terrain transfer), new robots get fresh adapters, or with
+///   [`TransferHeads::Prototype`] a copy of the prototype's.
 pub fn init_model(
     mode: Mode,
     mut config: PolicyConfig,
     robots: Vec<RobotSpec>,
     init_from: Option<&std::path::Path>,
+    heads: TransferHeads,
     device: &Device,
 ) -> Result<PolicyModel, LearnerError> {
     config.arch = mode.arch();
@@ -89,7 +93,7 @@ pub fn init_model(
         ))),
         (_, Some(path)) => {
             let ck = l3p_policy::load_checkpoint(path, device)?;
-            transfer_model(mode, ck.model, robots, device)
+            transfer_model(mode, ck.model, robots, heads, device)
         }
     }
 }
@@ -99,6 +103,7 @@ pub fn transfer_model(
     mode: Mode,
     source: PolicyModel,
     robots: Vec<RobotSpec>,
+    heads: TransferHeads,
     device: &Device,
 ) -> Result<PolicyModel, LearnerError> {
     if source.config.arch != mode.arch() {
@@ -122,7 +127,7 @@ pub fn transfer_model(
                 )));
             }
             fresh.net.robots[k] = source.net.robots[j].clone();
-        } else if mode == Mode::MlpTransfer {
+        } else if mode == Mode::MlpTransfer || heads == TransferHeads::Prototype {
             match (&proto, &proto_spec) {
                 (Some(h), Some(s))
                     if s.obs_dim == spec.obs_dim && s.action_dim == spec.action_dim =>
@@ -131,8 +136,10 @@ pub fn transfer_model(
                 }
                 _ => {
                     return Err(LearnerError::Config(format!(
-                        "robot {}: no robot with its dimensions in the MLP checkpoint\nhint: mlp-transfer needs equal observation and action sizes",
-                        spec.name
+                        "robot {}: no robot with its dimensions in the {} checkpoint\nhint: {} from the prototype needs equal observation and action sizes",
+                        spec.name,
+                        source.config.arch,
+                        mode.as_str()
                     )));
                 }
             }

@@ -86,6 +86,20 @@ impl std::str::FromStr for Mode {
     }
 }
 
+/// What a robot that the checkpoint does not know starts with under `l3p-transfer` (under
+/// `mlp-transfer` it always takes the prototype's network: a fresh one would be training from
+/// scratch).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "kebab-case")]
+pub enum TransferHeads {
+    /// Fresh adapters, std and critic around the frozen core: the paper's L3P-Transfer.
+    #[default]
+    Fresh,
+    /// A copy of the checkpoint's first robot's (the prototype's) adapters, std, critic and
+    /// recovery modules when the dimensions match — the same warm start `mlp-transfer` gets.
+    Prototype,
+}
+
 /// Learning-rate schedule.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
 #[serde(rename_all = "kebab-case")]
@@ -101,6 +115,8 @@ pub enum Schedule {
 #[serde(deny_unknown_fields, default)]
 pub struct PpoConfig {
     pub mode: Mode,
+    /// `l3p-transfer` only: how robots new to the checkpoint start.
+    pub transfer_heads: TransferHeads,
     pub num_learning_epochs: usize,
     pub num_mini_batches: usize,
     pub clip_param: f32,
@@ -140,6 +156,7 @@ impl Default for PpoConfig {
     fn default() -> Self {
         Self {
             mode: Mode::L3p,
+            transfer_heads: TransferHeads::Fresh,
             num_learning_epochs: 5,
             num_mini_batches: 4,
             clip_param: 0.2,

@@ -4,7 +4,7 @@
 mod common;
 
 use common::*;
-use l3p_learner::{Mode, Ppo, PpoConfig, init_model};
+use l3p_learner::{Mode, Ppo, PpoConfig, TransferHeads, init_model};
 use l3p_policy::{PolicyConfig, RecoveryConfig, RobotSpec, train_device};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -37,6 +37,7 @@ fn learns(mode: Mode) {
         small_config(),
         vec![RobotSpec::new("pm", OBS, ACT)],
         None,
+        TransferHeads::Fresh,
         &device,
     )
     .unwrap();

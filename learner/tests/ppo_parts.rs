@@ -159,6 +159,7 @@ fn l3p_transfer_keeps_the_core_bit_identical_and_trains_adapters() {
         small_config(),
         vec![RobotSpec::new("a1", OBS, ACT)],
         None,
+        TransferHeads::Fresh,
         &device,
     )
     .unwrap();
@@ -180,6 +181,7 @@ fn l3p_transfer_keeps_the_core_bit_identical_and_trains_adapters() {
         small_config(),
         vec![RobotSpec::new("pm", OBS, ACT)],
         Some(&path),
+        TransferHeads::Fresh,
         &device,
     )
     .unwrap();
@@ -227,6 +229,66 @@ fn l3p_transfer_keeps_the_core_bit_identical_and_trains_adapters() {
 }
 
 #[test]
+fn l3p_transfer_with_prototype_heads_starts_as_the_source_policy() {
+    let device = train_device();
+    let src = init_model(
+        Mode::L3p,
+        small_config(),
+        vec![RobotSpec::new("a1", OBS, ACT)],
+        None,
+        TransferHeads::Fresh,
+        &device,
+    )
+    .unwrap();
+    let obs: Vec<f32> = (0..2 * OBS).map(|i| (i as f32 * 0.37).sin()).collect();
+    let want = src.act_mean_host(0, &obs).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("a1.ckpt");
+    Ppo::new(PpoConfig::default(), src, device.clone())
+        .unwrap()
+        .save(&path)
+        .unwrap();
+    let load = |heads, robot: RobotSpec| {
+        init_model(
+            Mode::L3pTransfer,
+            small_config(),
+            vec![robot],
+            Some(&path),
+            heads,
+            &device,
+        )
+    };
+    let warm = load(TransferHeads::Prototype, RobotSpec::new("go1", OBS, ACT)).unwrap();
+    assert_eq!(
+        warm.act_mean_host(0, &obs).unwrap(),
+        want,
+        "prototype heads: the new robot acts exactly as the source robot did"
+    );
+    let fresh = load(TransferHeads::Fresh, RobotSpec::new("go1", OBS, ACT)).unwrap();
+    assert_ne!(fresh.act_mean_host(0, &obs).unwrap(), want);
+    assert_eq!(
+        core_sha256(&warm.net).unwrap(),
+        core_sha256(&fresh.net).unwrap(),
+        "both keep the checkpoint's core"
+    );
+    let err = load(
+        TransferHeads::Prototype,
+        RobotSpec::new("hexapod", OBS, ACT + 6),
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("hexapod") && err.contains("hint"), "{err}");
+    // A fresh head needs no matching dimensions.
+    assert!(
+        load(
+            TransferHeads::Fresh,
+            RobotSpec::new("hexapod", OBS, ACT + 6)
+        )
+        .is_ok()
+    );
+}
+
+#[test]
 fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
     let device = train_device();
     let model = init_model(
@@ -234,6 +296,7 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
         small_config(),
         vec![RobotSpec::new("pm", OBS, ACT)],
         None,
+        TransferHeads::Fresh,
         &device,
     )
     .unwrap();
@@ -260,6 +323,7 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
         small_config(),
         vec![RobotSpec::new("a1", OBS, ACT)],
         None,
+        TransferHeads::Fresh,
         &device,
     )
     .unwrap();
@@ -283,6 +347,7 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
         small_config(),
         vec![RobotSpec::new("go1", OBS, ACT)],
         Some(&path),
+        TransferHeads::Fresh,
         &device,
     )
     .unwrap();
@@ -294,6 +359,7 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
             small_config(),
             vec![RobotSpec::new("go1", OBS, ACT)],
             Some(&path),
+            TransferHeads::Fresh,
             &device
         )
         .is_err()
@@ -304,6 +370,7 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
             small_config(),
             vec![RobotSpec::new("go1", OBS, ACT)],
             None,
+            TransferHeads::Fresh,
             &device
         )
         .unwrap_err()
@@ -320,6 +387,7 @@ fn checkpoint_resume_gives_identical_actions_and_state() {
         small_config(),
         vec![RobotSpec::new("pm", OBS, ACT)],
         None,
+        TransferHeads::Fresh,
         &device,
     )
     .unwrap();
@@ -363,6 +431,7 @@ fn mlp_ppo() -> Ppo {
         small_config(),
         vec![RobotSpec::new("pm", OBS, ACT)],
         None,
+        TransferHeads::Fresh,
         &device,
     )
     .unwrap();

@@ -3,7 +3,7 @@
 //! PPO update that changes the policy.
 
 use l3p_actor::{Collector, RolloutEnv, sim_env};
-use l3p_learner::{Mode, Ppo, PpoConfig, RolloutBatch, init_model};
+use l3p_learner::{Mode, Ppo, PpoConfig, RolloutBatch, TransferHeads, init_model};
 use l3p_policy::{DeployPolicy, PolicyConfig};
 use l3p_proto::{RolloutChunk, codec};
 use l3p_robots::catalog::RobotSpec;
@@ -31,7 +31,15 @@ fn one_iteration_from_simulator_to_updated_policy() {
         io: None,
     };
     let device = l3p_policy::train_device();
-    let model = init_model(Mode::L3p, policy_config, vec![spec], None, &device).unwrap();
+    let model = init_model(
+        Mode::L3p,
+        policy_config,
+        vec![spec],
+        None,
+        TransferHeads::Fresh,
+        &device,
+    )
+    .unwrap();
     let mut ppo = Ppo::new(PpoConfig::default(), model, device).unwrap();
     let (export, _) = ppo.export("a1").unwrap();
     let policy = DeployPolicy::from_bytes(&export).unwrap();
