@@ -1,7 +1,8 @@
 //! `l3p robots add` through the binary: a user's URDF becomes a robot file that `robots list`,
 //! `robots check` and a training config know by name; adding it twice needs `--replace`; a file
 //! that is not a quadruped is a clear error. `l3p transfer` fine-tunes a registry checkpoint on
-//! it with the core frozen, and the registry records where the new policy came from.
+//! it with the core frozen, and the registry records where the new policy came from; a policy
+//! trained for an added robot deploys to a simulated one through `l3p deploy` and `l3p sim-robot`.
 
 use std::path::Path;
 use std::process::Command;
@@ -270,5 +271,151 @@ fn an_actor_elsewhere_fetches_an_added_robot_from_the_registry() {
     assert!(
         log.contains("yard_cat") && log.contains("robot-yard_cat@latest"),
         "{log}"
+    );
+}
+
+/// `l3p deploy` and `l3p sim-robot` know an added robot as they know a catalog one: a policy
+/// trained for it (here 2 iterations: the test is the deploy path, not the gait) is served by the
+/// registry, loaded by the controller for that robot and sent to a simulated robot built from the
+/// added description, at the control rate, until the sim-robot's run ends; an A1 policy is refused
+/// for it.
+#[test]
+fn a_policy_trained_for_an_added_robot_deploys_to_its_simulated_robot() {
+    let dir = tempfile::tempdir().unwrap();
+    let cwd = dir.path();
+    let urdf = l3p_robots::catalog::RobotSpec::by_name("a1")
+        .unwrap()
+        .urdf
+        .replacen("name=\"a1\"", "name=\"Porch Dog\"", 1);
+    std::fs::write(cwd.join("porch_dog.urdf"), urdf).unwrap();
+    let (ok, out) = l3p(&["robots", "add", "porch_dog.urdf"], cwd);
+    assert!(ok, "{out}");
+    let config = format!("[run]\nname = \"porch\"\n{TINY_FLAT_TASK}")
+        + "[learner]\nmax_iterations = 2\n[rollout]\nsteps_per_env = 8\n\
+           [[actors]]\nrobot = \"porch_dog\"\nenvs = 4\nthreads = 1\n\
+           [[actors]]\nrobot = \"a1\"\nenvs = 4\nthreads = 1\n";
+    std::fs::write(cwd.join("porch.toml"), config).unwrap();
+    let (ok, out) = l3p(&["train", "porch.toml", "--quiet"], cwd);
+    assert!(ok, "{out}");
+
+    let port = l3p_registry::net::free_loopback_port().unwrap();
+    let endpoint = format!("tcp/127.0.0.1:{port}");
+    let mut procs = Procs(Vec::new());
+    let data = cwd.join("l3p-data");
+    procs.spawn(
+        "registry",
+        &[
+            "registry",
+            "serve",
+            "--data",
+            data.to_str().unwrap(),
+            "--listen",
+            &endpoint,
+        ],
+        cwd,
+    );
+    let second = std::time::Duration::from_secs(1);
+    wait_for_port(port, 60 * second, "the registry", cwd);
+
+    // The A1 policy of the same run is refused for the added robot, before anything is sent.
+    let (ok, out) = l3p(
+        &[
+            "deploy",
+            "--robot",
+            "porch_dog",
+            "--robot-id",
+            "porch",
+            "--policy",
+            "porch-a1@latest",
+            "--connect",
+            &endpoint,
+        ],
+        cwd,
+    );
+    assert!(
+        !ok && out.contains("policy for a1") && out.contains("porch_dog"),
+        "{out}"
+    );
+    assert!(!out.contains("panicked"), "{out}");
+
+    let deploy_port = loop {
+        let p = l3p_registry::net::free_loopback_port().unwrap();
+        if p != port {
+            break p;
+        }
+    };
+    let deploy_ep = format!("tcp/127.0.0.1:{deploy_port}");
+    procs.spawn_split_in_dir(
+        "deploy",
+        &[
+            "deploy",
+            "--robot",
+            "porch_dog",
+            "--robot-id",
+            "porch",
+            "--policy",
+            "porch-porch_dog@latest",
+            "--connect",
+            &endpoint,
+            "--listen",
+            &deploy_ep,
+        ],
+        cwd,
+    );
+    wait_for_port(deploy_port, 60 * second, "the controller", cwd);
+    procs.spawn_split_in_dir(
+        "sim",
+        &[
+            "sim-robot",
+            "--robot",
+            "porch_dog",
+            "--robot-id",
+            "porch",
+            "--duration",
+            "6",
+            "--connect",
+            &deploy_ep,
+        ],
+        cwd,
+    );
+    let exit = procs.wait_exit("sim", 90 * second);
+    assert!(
+        exit.is_some_and(|s| s.success()),
+        "sim-robot failed{}",
+        log_tails(cwd)
+    );
+    let summary: serde_json::Value =
+        serde_json::from_str(std::fs::read_to_string(cwd.join("sim.out")).unwrap().trim()).unwrap();
+    eprintln!("sim-robot summary: {summary}");
+    let f = |k: &str| {
+        summary[k]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{k} in {summary}"))
+    };
+    assert_eq!(summary["robot"], "porch_dog");
+    // The simulated robot is the added description (its inferred pose stands at 0.290 m), not
+    // the catalog A1 whose URDF it came from (0.302 m).
+    let a1 = l3p_robots::catalog::RobotSpec::by_name("a1")
+        .unwrap()
+        .nominal_standing_height()
+        .unwrap() as f64;
+    let nominal = f("nominal_base_height");
+    assert!((nominal - a1).abs() > 0.005, "{nominal} vs A1 {a1}");
+    assert!(
+        f("policy_seconds") >= 2.0,
+        "too little time under the policy{}",
+        log_tails(cwd)
+    );
+    // 50 Hz commands while under the policy, none rejected, and a near-zero policy keeps the
+    // robot standing (no fall, no damping).
+    assert!(
+        f("commands_received") >= 40.0 * f("policy_seconds"),
+        "{summary}"
+    );
+    assert_eq!(f("commands_rejected"), 0.0, "{summary}");
+    assert_eq!(f("steps_damping"), 0.0, "{summary}");
+    assert!(
+        f("policy_min_base_height") > 0.75 * nominal && f("policy_max_tilt_deg") < 20.0,
+        "{summary}"
     );
 }

@@ -40,8 +40,30 @@ impl Procs {
         self.start(name, args, out, log);
     }
 
+    /// [`Procs::spawn_split`] with `log_dir` as the working directory (so `./l3p-data/robots`
+    /// names the robots added there).
+    pub fn spawn_split_in_dir(&mut self, name: &str, args: &[&str], log_dir: &Path) {
+        let out = std::fs::File::create(log_dir.join(format!("{name}.out"))).unwrap();
+        let log = std::fs::File::create(log_dir.join(format!("{name}.log"))).unwrap();
+        let mut command = Command::new(env!("CARGO_BIN_EXE_l3p"));
+        command.current_dir(log_dir);
+        self.start_command(name, command, args, out, log);
+    }
+
     fn start(&mut self, name: &str, args: &[&str], out: std::fs::File, log: std::fs::File) {
-        let child = Command::new(env!("CARGO_BIN_EXE_l3p"))
+        let command = Command::new(env!("CARGO_BIN_EXE_l3p"));
+        self.start_command(name, command, args, out, log);
+    }
+
+    fn start_command(
+        &mut self,
+        name: &str,
+        mut command: Command,
+        args: &[&str],
+        out: std::fs::File,
+        log: std::fs::File,
+    ) {
+        let child = command
             .args(args)
             .env("RUST_LOG", "info")
             .stdin(Stdio::null())
