@@ -519,6 +519,11 @@ pub struct EvalSummary {
     pub episode_return: f32,
     pub episode_length: f32,
     pub terrain_level: f32,
+    /// Mean terrain level of the last `num_envs` finished episodes: with the curriculum on, the
+    /// level the policy has walked itself to by the end (the paper's "final level the policy
+    /// could reach"); `terrain_level` averages over the whole climb.
+    #[serde(default)]
+    pub final_terrain_level: f32,
     pub lin_vel_error: f32,
     pub yaw_rate_error: f32,
     /// Share of episodes that ended by termination (fall, base contact) rather than time-out.
@@ -589,6 +594,10 @@ pub fn evaluate<E: RolloutEnv>(
         episode_return: mean(&|e| e.episode_return),
         episode_length: mean(&|e| e.length as f32),
         terrain_level: mean(&|e| e.terrain_level),
+        final_terrain_level: {
+            let last = &finished[finished.len().saturating_sub(n)..];
+            last.iter().map(|e| e.terrain_level).sum::<f32>() / last.len().max(1) as f32
+        },
         lin_vel_error: mean(&|e| e.lin_vel_error),
         yaw_rate_error: mean(&|e| e.yaw_rate_error),
         fall_fraction: mean(&|e| if e.terminated { 1.0 } else { 0.0 }),

@@ -19,6 +19,7 @@ use std::path::{Path, PathBuf};
 use l3p_learner::report::ReportRow;
 use l3p_learner::{Mode, TransferHeads};
 use l3p_robots::config::TerrainPreset;
+use l3p_robots::terrain::TerrainType;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{ActorSpec, Config};
@@ -159,6 +160,13 @@ pub struct EvaluationSpec {
     /// Constant forward speeds evaluated with gait diagnostics (besides the training command mix).
     pub forward: Vec<f32>,
     pub seed: u64,
+    /// Terrain types each target arm's final policy is also evaluated on, one at a time, with
+    /// the terrain-level curriculum running (the paper's simple→complex radar: how far up each
+    /// terrain's difficulty levels the policy walks itself). Empty: none.
+    pub terrain_types: Vec<TerrainType>,
+    /// Episodes per environment of each terrain-type evaluation (the curriculum moves a robot at
+    /// most one level per episode, starting from levels `0..=max_init_level`).
+    pub terrain_rounds: usize,
 }
 
 impl Default for EvaluationSpec {
@@ -168,6 +176,8 @@ impl Default for EvaluationSpec {
             envs: 16,
             forward: vec![0.5, 1.0],
             seed: 11,
+            terrain_types: Vec::new(),
+            terrain_rounds: 6,
         }
     }
 }
@@ -244,6 +254,9 @@ impl ExperimentSpec {
         let ev = &self.evaluation;
         if ev.episodes == 0 || ev.envs == 0 {
             return Err("evaluation.episodes and evaluation.envs must be >= 1".into());
+        }
+        if !ev.terrain_types.is_empty() && ev.terrain_rounds == 0 {
+            return Err("evaluation.terrain_rounds = 0: expected >= 1".into());
         }
         if ev.forward.iter().any(|v| !v.is_finite()) {
             return Err(format!(
@@ -547,6 +560,10 @@ pub struct ArmDone {
     /// (its own encoder/decoder: every catalog robot has the same observation and action layout).
     #[serde(default)]
     pub zero_shot: Option<Vec<crate::eval_cmd::EvalRow>>,
+    /// Target arms, per `evaluation.terrain_types` entry (snake_case name): the final policy on
+    /// that terrain alone with the curriculum running.
+    #[serde(default)]
+    pub by_terrain: BTreeMap<String, crate::eval_cmd::EvalRow>,
 }
 
 /// Where an arm stands, from its files.
@@ -636,6 +653,8 @@ pub struct ArmResult {
     /// Whether the arm trained over a terrain curriculum (on flat ground the level is meaningless
     /// and its columns stay empty).
     pub terrain_levels: bool,
+    /// Level reached per evaluated terrain type (`ArmDone::by_terrain`'s `final_terrain_level`).
+    pub terrain_reach: BTreeMap<String, f64>,
 }
 
 /// Mean and sample standard deviation (0 for one value); `None` when there are no values.
@@ -776,6 +795,56 @@ pub fn markdown_table(results: &[ArmResult]) -> String {
             fmt(mean_std(&zero), 2),
             fmt(mean_std(&col(&|r| r.wall_seconds / 60.0)), 1),
         ));
+    }
+    out
+}
+
+/// `env` on one terrain type alone, difficulty levels and curriculum on: the curriculum preset's
+/// ranges (the paper's if the arm trained on them), every column of type `t`.
+pub fn single_terrain_env(
+    env: &l3p_robots::config::EnvConfig,
+    t: TerrainType,
+) -> l3p_robots::config::EnvConfig {
+    let mut env = env.clone();
+    let terrain = &mut env.terrain;
+    if !matches!(terrain.preset, TerrainPreset::Paper) {
+        terrain.preset = TerrainPreset::Curriculum;
+    }
+    terrain.proportions = Some(l3p_robots::terrain::TypeProportions::only(t));
+    terrain.curriculum = Some(true);
+    env
+}
+
+/// The simple→complex table: per (robot, method), the level reached on each terrain type (mean
+/// ± std over seeds); arms without terrain evaluations are left out.
+pub fn terrain_reach_table(results: &[ArmResult], types: &[TerrainType]) -> String {
+    let mut groups: BTreeMap<(String, String), Vec<&ArmResult>> = BTreeMap::new();
+    for r in results.iter().filter(|r| !r.terrain_reach.is_empty()) {
+        groups
+            .entry((r.robot.clone(), r.method_label()))
+            .or_default()
+            .push(r);
+    }
+    let mut out = String::from("| robot | method | seeds |");
+    for t in types {
+        out.push_str(&format!(" {} |", t.name()));
+    }
+    out.push_str("\n|---|---|---|");
+    out.push_str(&"---|".repeat(types.len()));
+    out.push('\n');
+    for ((robot, method), rs) in &groups {
+        out.push_str(&format!("| {robot} | {method} | {} |", rs.len()));
+        for t in types {
+            let v: Vec<f64> = rs
+                .iter()
+                .filter_map(|r| r.terrain_reach.get(t.name()).copied())
+                .collect();
+            out.push_str(&match mean_std(&v) {
+                Some((m, sd)) => format!(" {m:.2} ± {sd:.2} |"),
+                None => " — |".into(),
+            });
+        }
+        out.push('\n');
     }
     out
 }
@@ -1101,6 +1170,7 @@ d_z = 2
             eval_return: reward,
             zero_shot_return: (method == Mode::L3pTransfer).then_some(1.5),
             terrain_levels: false,
+            terrain_reach: BTreeMap::new(),
         }
     }
 
@@ -1157,6 +1227,45 @@ d_z = 2
                 .filter(|l| l.starts_with("| go1"))
                 .count(),
             3
+        );
+    }
+
+    #[test]
+    fn terrain_reach_is_tabled_per_type_and_evaluated_on_one_type_with_the_curriculum() {
+        let mut a = result("go1", Mode::L3pTransfer, 1, Some(40), 20.0);
+        a.terrain_reach = [("flat".to_string(), 6.0), ("boxes".to_string(), 2.0)].into();
+        let mut b = result("go1", Mode::L3pTransfer, 2, Some(40), 20.0);
+        b.terrain_reach = [("flat".to_string(), 8.0)].into();
+        let plain = result("go1", Mode::Mlp, 1, Some(40), 20.0);
+        let types = [
+            TerrainType::Flat,
+            TerrainType::Boxes,
+            TerrainType::PyramidSlope,
+        ];
+        let table = terrain_reach_table(&[a, b, plain], &types);
+        assert!(table.starts_with("| robot | method | seeds | flat | boxes | pyramid_slope |"));
+        // Mean ± sample std over the seeds that have the type; none: a dash. Arms without terrain
+        // evaluations get no row.
+        assert!(
+            table.contains("| go1 | l3p-transfer | 2 | 7.00 ± 1.41 | 2.00 ± 0.00 | — |"),
+            "{table}"
+        );
+        assert!(!table.contains("| mlp |"), "{table}");
+
+        let mut env = l3p_robots::config::EnvConfig::default();
+        env.terrain.preset = TerrainPreset::SimpleRough;
+        let one = single_terrain_env(&env, TerrainType::Boxes);
+        assert_eq!(one.terrain.preset, TerrainPreset::Curriculum);
+        assert_eq!(one.terrain.curriculum, Some(true));
+        let spec = one.terrain.resolve("go1").unwrap();
+        assert_eq!(
+            spec.proportions,
+            l3p_robots::terrain::TypeProportions::only(TerrainType::Boxes)
+        );
+        env.terrain.preset = TerrainPreset::Paper;
+        assert_eq!(
+            single_terrain_env(&env, TerrainType::Flat).terrain.preset,
+            TerrainPreset::Paper
         );
     }
 }

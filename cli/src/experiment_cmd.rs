@@ -402,12 +402,17 @@ fn finish_arm(
         }
         None => None,
     };
+    let by_terrain = match arm.stage {
+        Stage::Target => evaluate_terrains(spec, &arm.config, &ckpt, &arm.robots[0])?,
+        Stage::Pretrain => BTreeMap::new(),
+    };
     let done = ArmDone {
         arm: arm.name.clone(),
         iterations: iteration,
         wall_seconds: wall,
         evaluations,
         zero_shot,
+        by_terrain,
     };
     std::fs::write(
         arm.data_dir().join("done.json"),
@@ -425,31 +430,85 @@ fn evaluate(
     policy_robot: &str,
     robot: &str,
 ) -> anyhow::Result<Vec<crate::eval_cmd::EvalRow>> {
-    let checkpoint = l3p_policy::load_checkpoint(ckpt, &l3p_policy::cpu_device())?;
-    let (bytes, _) = l3p_policy::export_bytes(&checkpoint.model, policy_robot)?;
-    let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
-    let spec_robot = l3p_robots::catalog::RobotSpec::by_name(robot)?;
-    let ev = &spec.evaluation;
+    let player = Player::load(spec, ckpt, policy_robot, robot)?;
     let mut speeds = vec![None];
-    speeds.extend(ev.forward.iter().map(|v| Some(*v)));
-    let mut rows = Vec::new();
-    for forward in speeds {
-        let mut env = config.env.clone();
-        if let Some(v) = forward {
-            crate::eval_cmd::constant_forward_command(&mut env, v);
-        }
-        rows.push(crate::eval_cmd::evaluate_row(
-            spec_robot,
-            &env,
-            &policy,
+    speeds.extend(spec.evaluation.forward.iter().map(|v| Some(*v)));
+    speeds
+        .into_iter()
+        .map(|forward| {
+            let mut env = config.env.clone();
+            if let Some(v) = forward {
+                crate::eval_cmd::constant_forward_command(&mut env, v);
+            }
+            player.play(&env, spec.evaluation.episodes, forward)
+        })
+        .collect()
+}
+
+/// The final policy of a target arm on each `evaluation.terrain_types` entry alone, with the
+/// curriculum running for `terrain_rounds` episodes per environment.
+fn evaluate_terrains(
+    spec: &ExperimentSpec,
+    config: &Config,
+    ckpt: &Path,
+    robot: &str,
+) -> anyhow::Result<BTreeMap<String, crate::eval_cmd::EvalRow>> {
+    let ev = &spec.evaluation;
+    if ev.terrain_types.is_empty() {
+        return Ok(BTreeMap::new());
+    }
+    let player = Player::load(spec, ckpt, robot, robot)?;
+    ev.terrain_types
+        .iter()
+        .map(|&t| {
+            let env = crate::experiment::single_terrain_env(&config.env, t);
+            let row = player.play(&env, ev.envs * ev.terrain_rounds, None)?;
+            Ok((t.name().to_string(), row))
+        })
+        .collect()
+}
+
+/// One robot's deployable policy from a checkpoint, and the robot it is played on.
+struct Player<'a> {
+    spec: &'a ExperimentSpec,
+    policy: l3p_policy::DeployPolicy,
+    robot: &'static l3p_robots::catalog::RobotSpec,
+}
+
+impl<'a> Player<'a> {
+    fn load(
+        spec: &'a ExperimentSpec,
+        ckpt: &Path,
+        policy_robot: &str,
+        robot: &str,
+    ) -> anyhow::Result<Self> {
+        let checkpoint = l3p_policy::load_checkpoint(ckpt, &l3p_policy::cpu_device())?;
+        let (bytes, _) = l3p_policy::export_bytes(&checkpoint.model, policy_robot)?;
+        Ok(Self {
+            spec,
+            policy: l3p_policy::DeployPolicy::from_bytes(&bytes)?,
+            robot: l3p_robots::catalog::RobotSpec::by_name(robot)?,
+        })
+    }
+
+    fn play(
+        &self,
+        env: &l3p_robots::config::EnvConfig,
+        episodes: usize,
+        forward: Option<f32>,
+    ) -> anyhow::Result<crate::eval_cmd::EvalRow> {
+        let ev = &self.spec.evaluation;
+        crate::eval_cmd::evaluate_row(
+            self.robot,
+            env,
+            &self.policy,
             ev.envs,
-            ev.episodes,
+            episodes,
             ev.seed,
             forward,
             None,
-        )?);
+        )
     }
-    Ok(rows)
 }
 
 /// A finished arm with its `done.json` and learner records, read once for the report.
@@ -495,7 +554,18 @@ fn collect_results(finished: &[Finished], window: usize) -> Vec<ArmResult> {
             eval_return: mix
                 .map(|r| r.summary.episode_return as f64)
                 .unwrap_or(f64::NAN),
-            terrain_levels: arm.config.env.terrain.preset != TerrainPreset::Flat,
+            terrain_levels: {
+                let t = &arm.config.env.terrain;
+                t.curriculum.unwrap_or(matches!(
+                    t.preset,
+                    TerrainPreset::Curriculum | TerrainPreset::Paper
+                ))
+            },
+            terrain_reach: done
+                .by_terrain
+                .iter()
+                .map(|(t, row)| (t.clone(), row.summary.final_terrain_level as f64))
+                .collect(),
             zero_shot_return: done.zero_shot.as_ref().and_then(|rows| {
                 rows.iter()
                     .find(|r| r.forward.is_none())
@@ -504,6 +574,85 @@ fn collect_results(finished: &[Finished], window: usize) -> Vec<ArmResult> {
         });
     }
     out
+}
+
+/// The simple→complex section of the report: the level each method's final policy reached on
+/// each `evaluation.terrain_types` entry (table), and a radar per target robot.
+fn terrain_reach_section(
+    spec: &ExperimentSpec,
+    arms: &[Arm],
+    results: &[ArmResult],
+    out: &Path,
+) -> anyhow::Result<String> {
+    let types = &spec.evaluation.terrain_types;
+    if types.is_empty() || results.iter().all(|r| r.terrain_reach.is_empty()) {
+        return Ok(String::new());
+    }
+    let max_level = arms
+        .first()
+        .map(|a| a.config.env.terrain.num_rows.saturating_sub(1).max(1))
+        .unwrap_or(9) as f64;
+    let mut md = format!(
+        "\n## Simple → complex terrain\n\nEach target arm's final policy on one terrain type at a \
+         time with the terrain-level curriculum running ({} episodes per environment from levels \
+         0–{}); the value is the mean level of the last episode of each environment (0–{max_level}: \
+         how far up that terrain's difficulty the policy walked itself).\n\n{}",
+        spec.evaluation.terrain_rounds,
+        arms.first()
+            .map(|a| a.config.env.terrain.max_init_level)
+            .unwrap_or(5),
+        crate::experiment::terrain_reach_table(results, types),
+    );
+    let axes: Vec<String> = types.iter().map(|t| t.name().replace('_', " ")).collect();
+    let mut robots: Vec<&str> = results
+        .iter()
+        .filter(|r| !r.terrain_reach.is_empty())
+        .map(|r| r.robot.as_str())
+        .collect();
+    robots.sort_unstable();
+    robots.dedup();
+    for robot in robots {
+        let mut labels: Vec<String> = results
+            .iter()
+            .filter(|r| r.robot == robot && !r.terrain_reach.is_empty())
+            .map(ArmResult::method_label)
+            .collect();
+        labels.sort();
+        labels.dedup();
+        let series: Vec<(String, Vec<f64>)> = labels
+            .into_iter()
+            .map(|label| {
+                let rs: Vec<&ArmResult> = results
+                    .iter()
+                    .filter(|r| r.robot == robot && r.method_label() == label)
+                    .collect();
+                let values = types
+                    .iter()
+                    .map(|t| {
+                        let v: Vec<f64> = rs
+                            .iter()
+                            .filter_map(|r| r.terrain_reach.get(t.name()).copied())
+                            .collect();
+                        crate::experiment::mean_std(&v).map_or(f64::NAN, |(m, _)| m)
+                    })
+                    .collect();
+                (format!("{label} ({} seeds)", rs.len()), values)
+            })
+            .collect();
+        let title = format!("{robot} — terrain level reached");
+        std::fs::write(
+            out.join(format!("{robot}-terrains.svg")),
+            l3p_learner::report::svg_radar(&title, &axes, &series, max_level),
+        )?;
+        std::fs::write(
+            out.join(format!("{robot}-terrains.png")),
+            l3p_learner::report::png_radar(&title, &axes, &series, max_level),
+        )?;
+        md.push_str(&format!(
+            "\n![{robot} terrain levels]({robot}-terrains.svg)\n"
+        ));
+    }
+    Ok(md)
 }
 
 /// The paper's column order of the methods.
@@ -603,9 +752,11 @@ fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
             md.push_str(&format!("\n![{robot} {label}]({robot}-{key}.svg)\n"));
         }
     }
+    let terrains = terrain_reach_section(&spec, &arms, &results, &out)?;
+    md.push_str(&terrains);
     let file = out.join("README.md");
     std::fs::write(&file, &md)?;
-    println!("{table}");
+    println!("{table}{terrains}");
     println!("wrote {} and the curves beside it", file.display());
     Ok(())
 }

@@ -1,4 +1,5 @@
-//! The shipped configs parse strictly; a misspelt key is an error naming it and the file.
+//! The shipped configs parse strictly; a misspelt key is an error naming it and the file; every
+//! shipped experiment plans into arms whose configs are valid.
 
 use std::path::{Path, PathBuf};
 
@@ -19,6 +20,25 @@ fn every_shipped_config_parses() {
         }
     }
     assert!(count >= 1, "no configs found");
+}
+
+#[test]
+fn every_shipped_experiment_plans() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let mut count = 0;
+    for entry in std::fs::read_dir(root.join("experiments")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let spec = l3p_cli::experiment::ExperimentSpec::load(&path)
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            let base = Config::load(&root.join(&spec.experiment.base_config)).unwrap();
+            let arms = l3p_cli::experiment::plan(&spec, &base)
+                .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            assert!(!arms.is_empty(), "{}", path.display());
+            count += 1;
+        }
+    }
+    assert!(count >= 4, "experiments not found");
 }
 
 #[test]

@@ -70,6 +70,8 @@ iterations = 3
 episodes = 2
 envs = 2
 forward = [0.5]
+terrain_types = ["flat", "pyramid_slope"]
+terrain_rounds = 2
 [[variants]]
 name = "warm"
 robots = ["go1"]
@@ -81,7 +83,13 @@ transfer_heads = "prototype"
 fn an_interrupted_experiment_resumes_finishes_and_reports() {
     let dir = tempfile::tempdir().unwrap();
     let cwd = dir.path();
-    let base = format!("[run]\nname = \"unused\"\n{TINY_FLAT_TASK}{BASE_REST}");
+    // A small terrain grid for the per-terrain-type evaluations (4 levels, 2 columns of 8 m).
+    let task = TINY_FLAT_TASK.replace(
+        "preset = \"flat\"",
+        "preset = \"flat\"\nnum_rows = 4\nnum_cols = 2\ntile_size = 8.0\nborder_width = 2.0\nmax_init_level = 1",
+    );
+    assert_ne!(task, TINY_FLAT_TASK);
+    let base = format!("[run]\nname = \"unused\"\n{task}{BASE_REST}");
     std::fs::write(cwd.join("base.toml"), base).unwrap();
     std::fs::write(cwd.join("micro.toml"), SPEC).unwrap();
     let exp = cwd.join("data/micro");
@@ -175,6 +183,20 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
     // The final policy under the command mix and at 0.5 m/s; zero-shot: A1's policy on Spot.
     assert_eq!(done["evaluations"]["spot"].as_array().unwrap().len(), 2);
     assert_eq!(done["zero_shot"].as_array().unwrap().len(), 2);
+    // Each evaluated terrain type alone, curriculum on: a level reached within the 4 levels.
+    for t in ["flat", "pyramid_slope"] {
+        let row = &done["by_terrain"][t];
+        let level = row["final_terrain_level"]
+            .as_f64()
+            .unwrap_or_else(|| panic!("{t}: {}", done["by_terrain"]));
+        assert!((0.0..=3.0).contains(&level), "{t}: {row}");
+        assert_eq!(row["episodes"].as_u64().unwrap(), 4, "{t}: {row}");
+    }
+    let pretrained: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(exp.join("pretrain-l3p-s1/done.json")).unwrap(),
+    )
+    .unwrap();
+    assert!(pretrained["by_terrain"].as_object().unwrap().is_empty());
     let arm_config = std::fs::read_to_string(exp.join("arms/spot-l3p-transfer-s1.toml")).unwrap();
     assert!(
         arm_config.contains("mode = \"l3p-transfer\""),
@@ -216,6 +238,16 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
     let svg = std::fs::read_to_string(exp.join("report/go1-episode_return.svg")).unwrap();
     assert!(svg.contains("l3p-transfer (1 seeds)"), "{svg}");
     assert!(svg.contains("l3p-transfer [warm] (1 seeds)"), "{svg}");
+    // The simple→complex section: a table row per target arm group and a radar per robot.
+    assert!(report.contains("| flat | pyramid_slope |"), "{report}");
+    let readme = std::fs::read_to_string(exp.join("report/README.md")).unwrap();
+    assert!(readme.contains("## Simple → complex terrain"), "{readme}");
+    let radar = std::fs::read_to_string(exp.join("report/spot-terrains.svg")).unwrap();
+    assert!(
+        radar.contains("pyramid slope") && radar.contains("l3p-transfer (1 seeds)"),
+        "{radar}"
+    );
+    assert!(exp.join("report/go1-terrains.png").exists());
     assert!(exp.join("report/go1-episode_return.png").exists());
 }
 

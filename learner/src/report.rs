@@ -2,7 +2,8 @@
 //!
 //! Main items: [`load_learner_records`], [`series`], [`smooth`], [`convergence_iteration`],
 //! [`ReportRow`] (`ReportRow::from_records`), [`svg_chart`], [`svg_bands`] (curves over seeds), and
-//! their PNG twins [`png_chart`], [`png_bands`] (drawn by [`crate::raster`]).
+//! their PNG twins [`png_chart`], [`png_bands`] (drawn by [`crate::raster`]); [`svg_radar`] /
+//! [`png_radar`] (one polygon per method over several axes, e.g. terrain types).
 //!
 //! Convergence (DESIGN §6): the first iteration at which the smoothed curve reaches a fraction of its
 //! final value. Rewards can be negative, so "85% of the final value" is measured over the range the
@@ -464,6 +465,178 @@ pub fn png_bands(
     bands_chart(title, y_label, lines).png()
 }
 
+/// A radar chart: `axes` around a circle from the top, clockwise; each series a closed polygon
+/// with `values[k]` on axis `k`, scaled so that `max` touches the outer ring (values are clamped
+/// to `0..=max`; non-finite ones drawn at 0).
+struct Radar<'a> {
+    title: &'a str,
+    axes: &'a [String],
+    series: &'a [(String, Vec<f64>)],
+    max: f64,
+}
+
+const RADAR_COLOURS: [&str; 6] = [
+    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
+];
+const RADAR_SIZE: f64 = 520.0;
+
+impl Radar<'_> {
+    fn centre(&self) -> (f64, f64, f64) {
+        (
+            RADAR_SIZE / 2.0,
+            RADAR_SIZE / 2.0 + 20.0,
+            RADAR_SIZE / 2.0 - 90.0,
+        )
+    }
+
+    /// Pixel position of value `v` on axis `k`.
+    fn at(&self, k: usize, v: f64) -> (f64, f64) {
+        let (cx, cy, r) = self.centre();
+        let n = self.axes.len().max(1) as f64;
+        let angle = -std::f64::consts::FRAC_PI_2 + std::f64::consts::TAU * k as f64 / n;
+        let v = if v.is_finite() {
+            v.clamp(0.0, self.max)
+        } else {
+            0.0
+        };
+        let rr = r * v / self.max.max(f64::MIN_POSITIVE);
+        (cx + rr * angle.cos(), cy + rr * angle.sin())
+    }
+
+    fn ring(&self, fraction: f64) -> Vec<(f64, f64)> {
+        (0..self.axes.len())
+            .map(|k| self.at(k, fraction * self.max))
+            .collect()
+    }
+
+    fn polygon(&self, values: &[f64]) -> Vec<(f64, f64)> {
+        (0..self.axes.len())
+            .map(|k| self.at(k, values.get(k).copied().unwrap_or(f64::NAN)))
+            .collect()
+    }
+
+    fn svg(&self) -> String {
+        let points = |p: &[(f64, f64)]| {
+            p.iter()
+                .map(|(x, y)| format!("{x:.1},{y:.1}"))
+                .collect::<Vec<_>>()
+                .join(" ")
+        };
+        let mut svg = format!(
+            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{RADAR_SIZE}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"12\">\n\
+             <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
+             <text x=\"{}\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">{}</text>\n",
+            RADAR_SIZE + 40.0,
+            RADAR_SIZE / 2.0,
+            escape(self.title)
+        );
+        let (cx, cy, _) = self.centre();
+        for i in 1..=4 {
+            let f = i as f64 / 4.0;
+            svg.push_str(&format!(
+                "<polygon fill=\"none\" stroke=\"#cccccc\" points=\"{}\"/>\n",
+                points(&self.ring(f))
+            ));
+            let (x, y) = self.at(0, f * self.max);
+            svg.push_str(&format!(
+                "<text x=\"{:.1}\" y=\"{:.1}\" fill=\"#888888\">{:.1}</text>\n",
+                x + 4.0,
+                y + 12.0,
+                f * self.max
+            ));
+        }
+        for (k, axis) in self.axes.iter().enumerate() {
+            let (x, y) = self.at(k, self.max);
+            let (lx, ly) = self.at(k, self.max * 1.12);
+            let anchor = if (lx - cx).abs() < 5.0 {
+                "middle"
+            } else if lx > cx {
+                "start"
+            } else {
+                "end"
+            };
+            svg.push_str(&format!(
+                "<line x1=\"{cx:.1}\" y1=\"{cy:.1}\" x2=\"{x:.1}\" y2=\"{y:.1}\" stroke=\"#cccccc\"/>\n\
+                 <text x=\"{lx:.1}\" y=\"{:.1}\" text-anchor=\"{anchor}\">{}</text>\n",
+                ly + 4.0,
+                escape(axis)
+            ));
+        }
+        for (k, (label, values)) in self.series.iter().enumerate() {
+            let colour = RADAR_COLOURS[k % RADAR_COLOURS.len()];
+            svg.push_str(&format!(
+                "<polygon fill=\"{colour}\" fill-opacity=\"0.15\" stroke=\"{colour}\" stroke-width=\"2\" points=\"{}\"/>\n\
+                 <text x=\"10\" y=\"{}\" fill=\"{colour}\">{}</text>\n",
+                points(&self.polygon(values)),
+                RADAR_SIZE + 10.0 - 15.0 * (self.series.len() - 1 - k) as f64,
+                escape(label)
+            ));
+        }
+        svg.push_str("</svg>\n");
+        svg
+    }
+
+    fn png(&self) -> Vec<u8> {
+        use crate::raster::{Anchor, Canvas, parse_hex};
+        let mut c = Canvas::new(RADAR_SIZE as usize, (RADAR_SIZE + 40.0) as usize);
+        let grey = [0xcc, 0xcc, 0xcc];
+        let black = [0, 0, 0];
+        let (cx, cy, _) = self.centre();
+        for i in 1..=4 {
+            let mut ring = self.ring(i as f64 / 4.0);
+            ring.push(ring[0]);
+            c.polyline(&ring, grey, 1.0);
+        }
+        for (k, axis) in self.axes.iter().enumerate() {
+            c.line((cx, cy), self.at(k, self.max), grey, 1.0);
+            let (lx, ly) = self.at(k, self.max * 1.12);
+            let anchor = if (lx - cx).abs() < 5.0 {
+                Anchor::Middle
+            } else if lx > cx {
+                Anchor::Start
+            } else {
+                Anchor::End
+            };
+            c.text(lx, ly, axis, black, 1, anchor);
+        }
+        for (k, (label, values)) in self.series.iter().enumerate() {
+            let rgb = parse_hex(RADAR_COLOURS[k % RADAR_COLOURS.len()]);
+            let mut polygon = self.polygon(values);
+            c.fill_polygon(&polygon, rgb, 0.15);
+            polygon.push(polygon[0]);
+            c.polyline(&polygon, rgb, 2.0);
+            let y = RADAR_SIZE + 6.0 - 15.0 * (self.series.len() - 1 - k) as f64;
+            c.text(10.0, y, label, rgb, 1, Anchor::Start);
+        }
+        c.text(RADAR_SIZE / 2.0, 16.0, self.title, black, 1, Anchor::Middle);
+        c.to_png()
+    }
+}
+
+/// A radar chart as a standalone SVG document (see [`png_radar`] for the PNG twin): `axes` around
+/// the circle clockwise from the top, one closed polygon per `(label, values)` series, `max` on
+/// the outer ring.
+pub fn svg_radar(title: &str, axes: &[String], series: &[(String, Vec<f64>)], max: f64) -> String {
+    Radar {
+        title,
+        axes,
+        series,
+        max,
+    }
+    .svg()
+}
+
+/// [`svg_radar`] as a PNG image.
+pub fn png_radar(title: &str, axes: &[String], series: &[(String, Vec<f64>)], max: f64) -> Vec<u8> {
+    Radar {
+        title,
+        axes,
+        series,
+        max,
+    }
+    .png()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -551,5 +724,47 @@ mod tests {
             buf.chunks(3).any(|p| p[2] > p[0] && p[0] > 200),
             "a light blue band"
         );
+    }
+
+    #[test]
+    fn a_radar_puts_each_value_on_its_axis() {
+        let axes: Vec<String> = ["flat", "stairs", "slope", "rough"]
+            .map(String::from)
+            .to_vec();
+        let series = vec![
+            ("l3p-transfer".to_string(), vec![8.0, 4.0, 8.0, 0.0]),
+            ("mlp-transfer".to_string(), vec![2.0, f64::NAN, 20.0, 1.0]),
+        ];
+        let radar = Radar {
+            title: "go1",
+            axes: &axes,
+            series: &series,
+            max: 8.0,
+        };
+        let (cx, cy, r) = radar.centre();
+        // Axis 0 points up, axis 1 right (clockwise); max on the outer ring, 0 at the centre.
+        let close =
+            |a: (f64, f64), b: (f64, f64)| (a.0 - b.0).abs() < 1e-9 && (a.1 - b.1).abs() < 1e-9;
+        assert!(close(radar.at(0, 8.0), (cx, cy - r)));
+        assert!(close(radar.at(1, 4.0), (cx + r / 2.0, cy)));
+        assert!(close(radar.at(3, 0.0), (cx, cy)));
+        // Out-of-range values are clamped, missing ones drawn at the centre.
+        assert!(close(radar.at(2, 20.0), radar.at(2, 8.0)));
+        assert!(close(radar.at(1, f64::NAN), (cx, cy)));
+        let svg = svg_radar("go1", &axes, &series, 8.0);
+        assert_eq!(
+            svg.matches("fill-opacity").count(),
+            2,
+            "one polygon per series"
+        );
+        assert!(svg.contains(">stairs</text>") && svg.contains(">mlp-transfer</text>"));
+        let png = png_radar("go1", &axes, &series, 8.0);
+        let decoder = png::Decoder::new(std::io::Cursor::new(png));
+        let mut reader = decoder.read_info().unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        reader.next_frame(&mut buf).unwrap();
+        let count = |rgb: [u8; 3]| buf.chunks(3).filter(|p| *p == rgb).count();
+        assert!(count([0x1f, 0x77, 0xb4]) > 300, "first polygon's outline");
+        assert!(count([0xff, 0x7f, 0x0e]) > 300, "second polygon's outline");
     }
 }
