@@ -295,9 +295,27 @@ proptest! {
             bytes[i] = value;
         }
         // A corrupted message either fails to decode or decodes into something validate() judges;
-        // neither path may panic.
-        if let Ok(decoded) = codec::decode::<RolloutChunk>(&bytes) {
-            let _ = decoded.validate();
+        // what validate() accepts has the shape its header claims and only finite numbers.
+        if let Ok(decoded) = codec::decode::<RolloutChunk>(&bytes)
+            && decoded.validate().is_ok()
+        {
+            let (n, t) = (decoded.num_envs as usize, decoded.steps as usize);
+            let (o, a) = (decoded.obs_dim as usize, decoded.action_dim as usize);
+            prop_assert_eq!(decoded.observations.len(), t * n * o);
+            prop_assert_eq!(decoded.actions.len(), t * n * a);
+            prop_assert_eq!(decoded.rewards.len(), t * n);
+            prop_assert_eq!(decoded.last_observations.len(), n * o);
+            for values in [
+                &decoded.observations,
+                &decoded.actions,
+                &decoded.log_probs,
+                &decoded.action_means,
+                &decoded.rewards,
+                &decoded.last_observations,
+            ] {
+                prop_assert!(values.iter().all(|v| v.is_finite()));
+            }
+            prop_assert!(decoded.action_stds.iter().all(|s| s.is_finite() && *s > 0.0));
         }
     }
 }

@@ -329,3 +329,164 @@ fn handle(
         ))),
     }
 }
+
+/// Fuzzing of the request decoding and handling on stable Rust (proptest): well-formed requests of
+/// every operation with their JSON mutated (byte flips, cuts, duplicated spans, odd numbers and
+/// strings spliced in), wrong operations and random bytes. Every request must be answered or refused
+/// — no panic — and the store must still answer afterwards. `L3P_FUZZ_CASES` raises the case count
+/// for a long run (`cargo test --release -p l3p-registry fuzz`).
+#[cfg(test)]
+mod fuzz {
+    use super::*;
+    use proptest::prelude::*;
+    use proptest::test_runner::{Config, TestRunner};
+
+    fn cases(default: u32) -> u32 {
+        std::env::var("L3P_FUZZ_CASES")
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(default)
+    }
+
+    /// Valid `(op, payload, attachment)` requests to mutate.
+    fn seeds() -> Vec<(String, Vec<u8>, Option<Vec<u8>>)> {
+        let v = WIRE_VERSION;
+        let blob = b"weights".to_vec();
+        let header = format!(
+            r#"{{"wire_version":{v},"spec":{{"name":"a1-core","kind":"core","robot":"a1","dims":{{"d_h":64}},"metrics":{{"reward":1.5}},"producer":"fuzz","lineage":[],"aliases":["best"]}},"sha256":"{}","size":{}}}"#,
+            crate::store::sha256_hex(&blob),
+            blob.len()
+        );
+        let json = |op: &str, text: String| (op.to_string(), text.into_bytes(), None);
+        vec![
+            json(
+                "list",
+                format!(r#"{{"wire_version":{v},"kind":"core","name":"a1-core"}}"#),
+            ),
+            json(
+                "show",
+                format!(r#"{{"wire_version":{v},"artifact":"a1-core@latest"}}"#),
+            ),
+            json(
+                "pull",
+                format!(r#"{{"wire_version":{v},"artifact":"a1-core@1"}}"#),
+            ),
+            json(
+                "lineage",
+                format!(r#"{{"wire_version":{v},"artifact":"a1-core@best"}}"#),
+            ),
+            json(
+                "history",
+                format!(r#"{{"wire_version":{v},"name":"a1-core","alias":"best"}}"#),
+            ),
+            json(
+                "tag",
+                format!(r#"{{"wire_version":{v},"artifact":"a1-core@1","alias":"stable"}}"#),
+            ),
+            ("put".to_string(), blob, Some(header.into_bytes())),
+        ]
+    }
+
+    /// Splices: byte flips, cuts, duplicated spans, and tokens that are valid JSON but odd.
+    fn mutate(mut bytes: Vec<u8>, edits: &[(usize, u8, u8)]) -> Vec<u8> {
+        const TOKENS: [&str; 10] = [
+            "1e999",
+            "-1",
+            "18446744073709551616",
+            "null",
+            "\"\"",
+            "[]",
+            "{}",
+            "\"../..\"",
+            "\"a@b@c\"",
+            "\"\\u0000\"",
+        ];
+        for &(at, byte, op) in edits {
+            if bytes.is_empty() {
+                bytes.push(byte);
+                continue;
+            }
+            let at = at % bytes.len();
+            match op % 5 {
+                0 => bytes[at] = byte,
+                1 => bytes.truncate(at),
+                2 => {
+                    let end = (at + byte as usize % 16).min(bytes.len());
+                    let span = bytes[at..end].to_vec();
+                    bytes.splice(at..at, span);
+                }
+                3 => {
+                    let token = TOKENS[byte as usize % TOKENS.len()].as_bytes();
+                    bytes.splice(at..at, token.iter().copied());
+                }
+                _ => {
+                    bytes.remove(at);
+                }
+            }
+        }
+        bytes
+    }
+
+    #[test]
+    fn fuzzed_requests_are_answered_or_refused_and_the_store_survives() {
+        let dir = tempfile::tempdir().unwrap();
+        let registry = Registry::open(dir.path()).unwrap();
+        let seeds = seeds();
+        // Something to find: every valid seed once (the put first).
+        for (op, payload, attachment) in seeds.iter().rev() {
+            handle(&registry, op, payload.clone(), attachment.clone())
+                .unwrap_or_else(|e| panic!("seed {op}: {e}"));
+        }
+        let n = seeds.len();
+        let edits = prop::collection::vec((any::<usize>(), any::<u8>(), any::<u8>()), 0..8);
+        let ops = prop::sample::select(
+            OPS.iter()
+                .map(|s| s.to_string())
+                .chain(["", "put/../list", "LIST"].map(String::from))
+                .collect::<Vec<_>>(),
+        );
+        let strategy = (
+            0..n,
+            edits.clone(),
+            edits,
+            any::<bool>(),
+            ops,
+            prop::collection::vec(any::<u8>(), 0..256),
+        );
+        let mut runner = TestRunner::new(Config {
+            cases: cases(512),
+            failure_persistence: None,
+            ..Config::default()
+        });
+        let (answered, refused) = (std::cell::Cell::new(0u32), std::cell::Cell::new(0u32));
+        runner
+            .run(
+                &strategy,
+                |(seed, payload_edits, header_edits, other_op, op, noise)| {
+                    let (seed_op, payload, attachment) = &seeds[seed];
+                    let op = if other_op { op } else { seed_op.clone() };
+                    let payload = if payload.is_empty() {
+                        noise
+                    } else {
+                        mutate(payload.clone(), &payload_edits)
+                    };
+                    let attachment = attachment.clone().map(|h| mutate(h, &header_edits));
+                    match handle(&registry, &op, payload, attachment) {
+                        Ok(_) => answered.set(answered.get() + 1),
+                        Err(e) => {
+                            prop_assert!(!e.to_string().is_empty());
+                            refused.set(refused.get() + 1);
+                        }
+                    }
+                    Ok(())
+                },
+            )
+            .unwrap();
+        let (answered, refused) = (answered.get(), refused.get());
+        eprintln!("fuzzed registry requests: {answered} answered, {refused} refused, 0 panics");
+        assert!(refused > 0, "the mutations never produced a bad request");
+        // The store still answers, and the seed artifact is intact.
+        let (op, payload, _) = &seeds[1];
+        assert!(handle(&registry, op, payload.clone(), None).is_ok());
+    }
+}
