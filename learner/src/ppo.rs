@@ -516,9 +516,7 @@ impl Ppo {
 
     pub fn save(&self, path: &std::path::Path) -> Result<(), LearnerError> {
         let bytes = self.checkpoint_bytes()?;
-        let tmp = path.with_extension("tmp");
-        std::fs::write(&tmp, &bytes)
-            .and_then(|_| std::fs::rename(&tmp, path))
+        l3p_policy::write_atomic(path, &bytes)
             .map_err(|e| LearnerError::Checkpoint(format!("{}: {e}", path.display())))
     }
 

@@ -83,6 +83,11 @@ pub fn checkpoint_to_bytes(
     Ok(out)
 }
 
+/// Whether `bytes` start like a checkpoint (rather than an export), without parsing them.
+pub fn is_checkpoint(bytes: &[u8]) -> bool {
+    bytes.starts_with(MAGIC)
+}
+
 /// Parse a checkpoint blob and rebuild the model on `device`.
 pub fn checkpoint_from_bytes(bytes: &[u8], device: &Device) -> Result<Checkpoint, PolicyError> {
     let bad = |m: &str| PolicyError::Checkpoint(m.to_string());

@@ -28,7 +28,7 @@ pub mod nets;
 
 pub use checkpoint::{
     Checkpoint, CheckpointHeader, checkpoint_from_bytes, checkpoint_to_bytes, core_sha256,
-    export_bytes, export_to_dir, load_checkpoint, save_checkpoint, write_atomic,
+    export_bytes, export_to_dir, is_checkpoint, load_checkpoint, save_checkpoint, write_atomic,
 };
 pub use config::{
     Arch, IO_VERSION, ObsSegment, PolicyConfig, RecoveryConfig, RobotIo, RobotSpec, mlp_params,

@@ -239,8 +239,16 @@ where
     assert!(codec::decode_json::<T>(&bytes[..bytes.len() / 2]).is_err());
 }
 
+/// 64 cases per property; `L3P_FUZZ_CASES` raises it for a long run.
+fn cases() -> u32 {
+    std::env::var("L3P_FUZZ_CASES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(64)
+}
+
 proptest! {
-    #![proptest_config(ProptestConfig::with_cases(64))]
+    #![proptest_config(ProptestConfig::with_cases(cases()))]
 
     #[test]
     fn rollout_chunks_round_trip_and_validate(c in chunk()) {
