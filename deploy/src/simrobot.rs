@@ -13,7 +13,7 @@ use l3p_proto::{ControlMode, RobotCommand, RobotState, WIRE_VERSION, codec, keys
 use l3p_robots::actuator::Actuator;
 use l3p_robots::catalog::{Gains, NUM_JOINTS, RobotSpec};
 use l3p_robots::sim::{RobotBinding, SimConfig, SimWorld};
-use l3p_robots::task::RobotState as SimState;
+use l3p_robots::task::SimState;
 use rapier3d::math::{Pose, Vec3};
 use serde::{Deserialize, Serialize};
 use tokio_util::sync::CancellationToken;

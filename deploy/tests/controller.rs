@@ -88,7 +88,7 @@ fn observation_matches_with_clock(gait_clock_hz: f32) {
     assert_eq!(dim, task.obs_dim());
     let mut rng = StdRng::seed_from_u64(3);
     for _ in 0..20 {
-        let mut sim = l3p_robots::task::RobotState::default();
+        let mut sim = l3p_robots::task::SimState::default();
         let yaw = rng.random_range(-3.0..3.0);
         // Some roll and pitch too.
         let (r, p) = (

@@ -13,7 +13,7 @@ use crate::catalog::{Gains, NUM_JOINTS, RobotSpec};
 use crate::config::EnvConfig;
 use crate::model::RobotModel;
 use crate::sim::{RobotBinding, SimConfig, SimError, SimWorld};
-use crate::task::{RobotState, projected_gravity};
+use crate::task::{SimState, projected_gravity};
 use crate::vecenv::{StageTimings, VecEnv, VecEnvError};
 
 /// Result of a standing check.
@@ -63,7 +63,7 @@ pub fn stand_check(
         Pose::from_translation(Vec3::new(0.0, 0.0, h + 0.02)),
         q,
     )?;
-    let mut s = RobotState::default();
+    let mut s = SimState::default();
     let mut finite = true;
     let steps = (seconds / cfg.dt).round() as usize;
     for i in 0..steps {

@@ -2,7 +2,7 @@
 //! env and control step, what a locomotion engineer looks at; [`GaitReport`] is the result and
 //! [`WalkCriterion`] the pass/fail rule that `l3p eval` and `l3p bench walk` apply.
 //!
-//! Measures (all from the simulator snapshot [`RobotState`] and the joint targets sent):
+//! Measures (all from the simulator snapshot [`SimState`] and the joint targets sent):
 //! - base height above the ground under the base (mean, min);
 //! - per foot: swing share (steps without contact) and touchdowns per second;
 //! - share of steps in which any non-foot body (penalised links or the base) touches the ground;
@@ -15,12 +15,12 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::task::{MAX_PENALISED_BODIES, NUM_FEET, NUM_JOINTS, RobotState, wrap_to_pi, yaw_of};
+use crate::task::{MAX_PENALISED_BODIES, NUM_FEET, NUM_JOINTS, SimState, wrap_to_pi, yaw_of};
 
 /// One control step of one env, as the meter sees it.
 #[derive(Debug, Clone, Copy)]
 pub struct GaitSample<'a> {
-    pub state: &'a RobotState,
+    pub state: &'a SimState,
     /// Joint position targets sent for this step (rad).
     pub targets: &'a [f32; NUM_JOINTS],
     /// Terrain height under the base (m).
@@ -381,7 +381,7 @@ mod tests {
     use super::*;
     use crate::task::quat_from_yaw;
 
-    fn sample<'a>(state: &'a RobotState, targets: &'a [f32; NUM_JOINTS]) -> GaitSample<'a> {
+    fn sample<'a>(state: &'a SimState, targets: &'a [f32; NUM_JOINTS]) -> GaitSample<'a> {
         GaitSample {
             state,
             targets,
@@ -396,7 +396,7 @@ mod tests {
     #[test]
     fn known_trot_pattern_gives_known_swing_share_and_touchdowns() {
         let mut meter = GaitMeter::new();
-        let mut state = RobotState::default();
+        let mut state = SimState::default();
         state.base_pos[2] = 0.27;
         for step in 0..200 {
             let phase_a = (step / 10) % 2 == 0;
@@ -432,7 +432,7 @@ mod tests {
     #[test]
     fn known_chatter_and_knee_contact() {
         let mut meter = GaitMeter::new();
-        let mut state = RobotState::default();
+        let mut state = SimState::default();
         state.base_pos[2] = 0.13;
         state.foot_force = [30.0; NUM_FEET];
         for step in 0..100 {
@@ -469,7 +469,7 @@ mod tests {
     #[test]
     fn heading_drift_unwraps_across_pi_and_is_per_episode() {
         let mut meter = GaitMeter::new();
-        let mut state = RobotState::default();
+        let mut state = SimState::default();
         // Turns 0.05 rad per step for 100 steps (5 rad: crosses ±π) in episode one…
         for k in 0..=100 {
             state.base_quat = quat_from_yaw(wrap_to_pi(0.05 * k as f32));
@@ -496,7 +496,7 @@ mod tests {
     fn mean_velocity_is_in_the_heading_frame() {
         // Facing +y (yaw 90°) and moving at 0.8 m/s along +y, then drifting 0.2 m/s along −x (to
         // the robot's left): forward 0.8, left 0.2 whatever the world axes.
-        let mut state = RobotState {
+        let mut state = SimState {
             base_quat: quat_from_yaw(std::f32::consts::FRAC_PI_2),
             base_lin_vel_w: [-0.2, 0.8, 0.1],
             ..Default::default()

@@ -15,7 +15,7 @@
 //!   [`urdf::UrdfError`] with file, element and line.
 //! - [`sim::SimWorld`]: `new(SimConfig)`, `add_flat_ground`, `add_heightfield_ground`, `add_robot(model,
 //!   binding, actuator, pose, q) -> index`, `set_targets`, `step` (one physics step, PD inside),
-//!   `clear_contact_maxima`, `read_state(i, &mut task::RobotState)`, `reset_robot`, `push_base`,
+//!   `clear_contact_maxima`, `read_state(i, &mut task::SimState)`, `reset_robot`, `push_base`,
 //!   `set_friction`, `set_base_randomization`, `set_joint_dynamics`. [`actuator::Actuator`] / [`actuator::dc_motor_clip`].
 //! - [`vecenv::VecEnv`]: `VecEnv::new(&spec, &EnvConfig, num_envs, threads, seed)?`, `obs_dim()`,
 //!   `action_dim()`, `reset_all() -> &[f32]` (`[N * obs_dim]`), `step(&actions)? -> StepOutput { obs,

@@ -1,6 +1,6 @@
 //! Rapier physics for legged robots: a [`SimWorld`] holds several robots (each a rapier multibody
 //! built from a [`RobotModel`]) on one ground (flat or a heightfield), steps them with a PD
-//! [`crate::actuator`] and reads [`RobotState`] snapshots. One world per worker thread; robots in a
+//! [`crate::actuator`] and reads [`SimState`] snapshots. One world per worker thread; robots in a
 //! world never collide with each other (collision groups robot↔ground only, no self-contacts).
 //!
 //! Choices (measured facts in `reference/rapier-quadruped-notes.md`, our numbers in `NOTES.md`):
@@ -20,7 +20,7 @@ use rapier3d::prelude::*;
 
 use crate::actuator::Actuator;
 use crate::model::{JointKind, RobotModel, ShapeSpec};
-use crate::task::{MAX_PENALISED_BODIES, NUM_FEET, NUM_JOINTS, RobotState};
+use crate::task::{MAX_PENALISED_BODIES, NUM_FEET, NUM_JOINTS, SimState};
 
 /// How PD torques reach rapier.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -747,7 +747,7 @@ impl SimWorld {
     }
 
     /// Fills `out` with robot `robot`'s state.
-    pub fn read_state(&self, robot: usize, out: &mut RobotState) {
+    pub fn read_state(&self, robot: usize, out: &mut SimState) {
         let Some(r) = self.robots.get(robot) else {
             return;
         };

@@ -2,14 +2,14 @@
 //! draws, as pure `f32` functions over a per-env physics snapshot. No physics, no allocation per step.
 //!
 //! # Public API (what the vectorised env calls)
-//! - [`RobotState`]: the snapshot the physics fills per env per control step (fixed arrays: 12 leg
+//! - [`SimState`]: the snapshot the physics fills per env per control step (fixed arrays: 12 leg
 //!   joints, 4 feet, up to 8 penalised bodies).
 //! - [`RobotTaskParams`]: per-robot constants (default pose, joint limits, soft-limit factor, action
 //!   scale) from the robot catalog.
 //! - [`Task`]: `Task::new(spec: TaskSpec, robot: RobotTaskParams)`, then per env per control step:
 //!   1. [`Task::process_action`]: raw policy output → clipped action + joint position targets
 //!      `q* = default + scale · a`;
-//!   2. physics runs `decimation` substeps and fills a [`RobotState`];
+//!   2. physics runs `decimation` substeps and fills a [`SimState`];
 //!   3. [`Task::evaluate`]: terminations, rewards (per term, weighted × dt), bookkeeping
 //!      (air time, last action, last joint velocity, episode sums) → [`StepResult`];
 //!   4. if `terminated || truncated`: [`Task::finish_episode`] → [`EpisodeSummary`] (and the
@@ -67,7 +67,7 @@ pub enum TaskError {
 /// contact forces are norms in newtons, the **maximum over the substeps** of the control step
 /// (stands in for IsaacLab's 3-substep contact history). Joint order is the robot's catalog order.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct RobotState {
+pub struct SimState {
     pub base_pos: [f32; 3],
     pub base_quat: [f32; 4],
     pub base_lin_vel_w: [f32; 3],
@@ -84,9 +84,9 @@ pub struct RobotState {
     pub base_force: f32,
 }
 
-impl Default for RobotState {
+impl Default for SimState {
     fn default() -> Self {
-        RobotState {
+        SimState {
             base_pos: [0.0; 3],
             base_quat: [1.0, 0.0, 0.0, 0.0],
             base_lin_vel_w: [0.0; 3],
@@ -101,7 +101,7 @@ impl Default for RobotState {
     }
 }
 
-impl RobotState {
+impl SimState {
     /// True when every field is finite.
     pub fn is_finite(&self) -> bool {
         self.base_pos.iter().all(|v| v.is_finite())
@@ -213,7 +213,7 @@ pub struct RobotTaskParams {
     pub soft_limit_factor: f32,
     /// `q* = default + action_scale · a` (0.25 Unitree, 0.5 ANYmal, 0.2 Spot).
     pub action_scale: f32,
-    /// How many entries of [`RobotState::penalised_force`] are used.
+    /// How many entries of [`SimState::penalised_force`] are used.
     pub num_penalised_bodies: usize,
     /// Base height above the ground in the default pose with the feet on the ground (m): the
     /// target of `base_height_l2`.
@@ -639,7 +639,7 @@ impl Task {
     }
 
     /// Heading → yaw rate and standing → zero (IsaacLab `_update_command`).
-    pub fn apply_command_modes(&self, cmd: &mut Command, state: &RobotState) {
+    pub fn apply_command_modes(&self, cmd: &mut Command, state: &SimState) {
         let c = &self.spec.commands;
         if cmd.heading_mode {
             cmd.wz = heading_yaw_rate(
@@ -661,7 +661,7 @@ impl Task {
     pub fn update_commands<R: Rng + ?Sized>(
         &self,
         env: &mut TaskEnvState,
-        state: &RobotState,
+        state: &SimState,
         rng: &mut R,
     ) {
         env.command.time_left -= self.spec.step_dt;
@@ -676,7 +676,7 @@ impl Task {
     pub fn reset_env<R: Rng + ?Sized>(
         &self,
         env: &mut TaskEnvState,
-        state: &RobotState,
+        state: &SimState,
         origin: [f32; 3],
         rng: &mut R,
     ) {
@@ -775,7 +775,7 @@ impl Task {
     pub fn evaluate(
         &self,
         env: &mut TaskEnvState,
-        state: &RobotState,
+        state: &SimState,
         action: &[f32; NUM_JOINTS],
         terrain: &Terrain,
     ) -> StepResult {
@@ -790,7 +790,7 @@ impl Task {
     pub fn evaluate_with_mean(
         &self,
         env: &mut TaskEnvState,
-        state: &RobotState,
+        state: &SimState,
         action: &[f32; NUM_JOINTS],
         mean: Option<&[f32; NUM_JOINTS]>,
         terrain: &Terrain,
@@ -952,7 +952,7 @@ impl Task {
     }
 
     /// Statistics of the episode that just ended in `state` (call before the reset).
-    pub fn finish_episode(&self, env: &TaskEnvState, state: &RobotState) -> EpisodeSummary {
+    pub fn finish_episode(&self, env: &TaskEnvState, state: &SimState) -> EpisodeSummary {
         let e = &env.episode;
         let n = e.steps.max(1) as f32;
         let (dx, dy) = (
@@ -980,7 +980,7 @@ impl Task {
     pub fn observe<R: Rng + ?Sized>(
         &self,
         env: &TaskEnvState,
-        state: &RobotState,
+        state: &SimState,
         terrain: &Terrain,
         rng: &mut R,
         out: &mut [f32],
@@ -1106,8 +1106,8 @@ mod tests {
         (Task::new(spec, p).unwrap(), terrain)
     }
 
-    fn standing_state() -> RobotState {
-        RobotState {
+    fn standing_state() -> SimState {
+        SimState {
             base_pos: [0.0, 0.0, 0.3],
             joint_pos: A1_DEFAULT,
             foot_force: [30.0; 4],
@@ -1156,7 +1156,7 @@ mod tests {
             heading_mode: true,
             ..Default::default()
         };
-        let st = RobotState {
+        let st = SimState {
             base_quat: quat_from_yaw(0.4),
             ..standing_state()
         };
@@ -1353,7 +1353,7 @@ mod tests {
     }
 
     /// A freshly reset env commanded to walk forward at 0.5 m/s for 10 s.
-    fn commanded_half_speed(task: &Task, st: &RobotState, rng: &mut StdRng) -> TaskEnvState {
+    fn commanded_half_speed(task: &Task, st: &SimState, rng: &mut StdRng) -> TaskEnvState {
         let mut env = TaskEnvState::new();
         task.reset_env(&mut env, st, [0.0; 3], rng);
         env.command = Command {

@@ -24,7 +24,7 @@ use crate::gait::{GaitMeter, GaitReport, GaitSample};
 use crate::model::RobotModel;
 use crate::sim::{JointDynamics, RobotBinding, SimConfig, SimWorld};
 use crate::task::{
-    Command, DoneReason, NUM_FEET, NUM_REWARD_TERMS, RobotState, StepResult, Task, TaskEnvState,
+    Command, DoneReason, NUM_FEET, NUM_REWARD_TERMS, SimState, StepResult, Task, TaskEnvState,
     TaskError,
 };
 use crate::terrain::{Curriculum, Terrain, TerrainError, TerrainType};
@@ -134,7 +134,7 @@ struct Worker {
     first_env: usize,
     n: usize,
     envs: Vec<TaskEnvState>,
-    states: Vec<RobotState>,
+    states: Vec<SimState>,
     actions: Vec<[f32; NUM_JOINTS]>,
     /// The policy's mean actions for the next step (see [`VecEnv::set_action_means`]).
     means: Vec<[f32; NUM_JOINTS]>,
@@ -171,7 +171,7 @@ struct Shared {
 /// One env as a viewer sees it (see [`VecEnv::snapshot`]).
 #[derive(Debug, Clone)]
 pub struct EnvSnapshot<'a> {
-    pub state: &'a RobotState,
+    pub state: &'a SimState,
     /// World poses of the model's bodies, in [`RobotModel::bodies`] order.
     pub body_poses: Vec<Pose>,
     /// World position of each foot (canonical order).
@@ -214,7 +214,7 @@ impl std::fmt::Debug for VecEnv {
 const EXPLODED_LIN_VEL: f32 = 50.0;
 const EXPLODED_JOINT_VEL: f32 = 500.0;
 
-fn exploded(s: &RobotState) -> bool {
+fn exploded(s: &SimState) -> bool {
     !s.is_finite()
         || s.base_lin_vel_w.iter().any(|v| v.abs() > EXPLODED_LIN_VEL)
         || s.base_ang_vel_w
@@ -309,7 +309,7 @@ impl VecEnv {
                 first_env: first,
                 n,
                 envs: vec![TaskEnvState::new(); n],
-                states: vec![RobotState::default(); n],
+                states: vec![SimState::default(); n],
                 actions: vec![[0.0; NUM_JOINTS]; n],
                 means: vec![[0.0; NUM_JOINTS]; n],
                 has_means: false,
@@ -404,7 +404,7 @@ impl VecEnv {
     }
 
     /// Latest robot state of env `e` (after the last step or reset).
-    pub fn robot_state(&self, e: usize) -> Option<&RobotState> {
+    pub fn robot_state(&self, e: usize) -> Option<&SimState> {
         self.workers
             .iter()
             .find(|w| e >= w.first_env && e < w.first_env + w.n)

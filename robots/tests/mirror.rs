@@ -5,7 +5,7 @@ use l3p_robots::catalog::RobotSpec;
 use l3p_robots::config::{EnvConfig, TerrainPreset};
 use l3p_robots::mirror::{SignedPermutation, TaskMirror, observation_mirror};
 use l3p_robots::task::{
-    Command, RobotState, Task, TaskEnvState, gait_clock_observation, quat_from_yaw_and_tilt,
+    Command, SimState, Task, TaskEnvState, gait_clock_observation, quat_from_yaw_and_tilt,
 };
 use l3p_robots::terrain::Terrain;
 use rand::rngs::StdRng;
@@ -77,7 +77,7 @@ fn the_clock_moves_half_a_period_and_the_scan_reverses_its_rows() {
 }
 
 /// The reflection `y → −y` of a simulated state.
-fn mirror_state(s: &RobotState, joints: &SignedPermutation) -> RobotState {
+fn mirror_state(s: &SimState, joints: &SignedPermutation) -> SimState {
     let q = s.base_quat;
     let mut m = *s;
     m.base_pos = [s.base_pos[0], -s.base_pos[1], s.base_pos[2]];
@@ -116,7 +116,7 @@ fn a_mirrored_state_is_observed_as_the_mirrored_observation() {
     let mirror = mirror_of(robot, false, false);
     let mut rng = StdRng::seed_from_u64(5);
     for _ in 0..20 {
-        let mut s = RobotState::default();
+        let mut s = SimState::default();
         let yaw = rng.random_range(-3.0..3.0);
         let tilt = [
             rng.random_range(-0.2f32..0.2),

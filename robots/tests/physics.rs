@@ -3,12 +3,12 @@
 use l3p_robots::actuator::Actuator;
 use l3p_robots::catalog::{Gains, RobotSpec};
 use l3p_robots::sim::{ActuatorMode, JointDynamics, RobotBinding, SimConfig, SimWorld};
-use l3p_robots::task::{RobotState, projected_gravity};
+use l3p_robots::task::{SimState, projected_gravity};
 use rapier3d::math::{Pose, Vec3};
 
 /// Drops `spec` 2 cm above its nominal standing height, holds the default pose for `seconds` with
 /// `gains`, returns the final state and the nominal height.
-fn stand(spec: &RobotSpec, gains: Gains, seconds: f32, cfg: SimConfig) -> (RobotState, f32) {
+fn stand(spec: &RobotSpec, gains: Gains, seconds: f32, cfg: SimConfig) -> (SimState, f32) {
     let model = spec.model().unwrap();
     let h = spec.nominal_standing_height().unwrap();
     let mut w = SimWorld::new(cfg);
@@ -24,7 +24,7 @@ fn stand(spec: &RobotSpec, gains: Gains, seconds: f32, cfg: SimConfig) -> (Robot
         .unwrap();
     w.set_targets(id, &spec.default_pose);
     let steps = (seconds / cfg.dt) as usize;
-    let mut s = RobotState::default();
+    let mut s = SimState::default();
     for i in 0..steps {
         if i % 4 == 0 {
             w.clear_contact_maxima();
@@ -121,7 +121,7 @@ fn a_pushed_robot_moves_and_stays_finite() {
     for _ in 0..200 {
         w.step();
     }
-    let mut s = RobotState::default();
+    let mut s = SimState::default();
     w.read_state(id, &mut s);
     let y0 = s.base_pos[1];
     w.push_base(id, 0.0, 2.0);
@@ -222,7 +222,7 @@ fn swing(dynamics: JointDynamics, steps: usize) -> Vec<f32> {
     let mut target = spec.default_pose;
     target[1] += 0.5;
     w.set_targets(id, &target);
-    let mut s = RobotState::default();
+    let mut s = SimState::default();
     (0..steps)
         .map(|_| {
             w.step();
@@ -315,7 +315,7 @@ fn repeated_mass_randomisation_does_not_compound() {
             w.set_base_randomization(id, 3.0, [0.02, 0.0, 0.0]);
         }
         w.set_targets(id, &spec.default_pose);
-        let mut s = RobotState::default();
+        let mut s = SimState::default();
         for _ in 0..200 {
             w.clear_contact_maxima();
             w.step();
@@ -361,7 +361,7 @@ fn ten_ms_physics_stands_like_five_ms() {
                 spec.name,
                 gains.kp
             );
-            let speed = |s: &RobotState| s.base_lin_vel_w.iter().map(|v| v * v).sum::<f32>().sqrt();
+            let speed = |s: &SimState| s.base_lin_vel_w.iter().map(|v| v * v).sum::<f32>().sqrt();
             println!(
                 "{:9} kp {:>5}: base {za:.3} / {zb:.3} m, speed {:.4} / {:.4} m/s (5 / 10 ms)",
                 spec.name,
