@@ -27,7 +27,6 @@ use l3p_robots::task::DoneReason;
 use l3p_robots::vecenv::VecEnv;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
-use sha2::{Digest, Sha256};
 use tokio_util::sync::CancellationToken;
 use tracing::{info, warn};
 use zenoh::Session;
@@ -360,7 +359,7 @@ pub async fn fetch_policy(
             Ok(sample) => {
                 let blob: WeightsBlob =
                     codec::decode(&sample.payload().to_bytes()).map_err(|e| fail(e.to_string()))?;
-                let sha = hex::encode(Sha256::digest(&blob.bytes));
+                let sha = l3p_proto::sha256_hex(&blob.bytes);
                 if sha != entry.sha256 || sha != blob.sha256 {
                     return Err(fail(format!(
                         "sha256 mismatch: announce {}, blob says {}, bytes hash to {sha}",

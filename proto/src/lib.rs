@@ -10,6 +10,19 @@
 //! Architecture invariants: key expressions are built only by [`keys`]; bytes are produced and parsed
 //! only by [`codec`]; this crate depends on no other project crate.
 
+/// `impl WireMessage` for a message struct with a `wire_version` field (defined before the modules
+/// that use it: `macro_rules!` scope is textual).
+macro_rules! wire_message {
+    ($ty:ty, $name:literal) => {
+        impl WireMessage for $ty {
+            const NAME: &'static str = $name;
+            fn wire_version(&self) -> u32 {
+                self.wire_version
+            }
+        }
+    };
+}
+
 pub mod codec;
 pub mod config;
 pub mod keys;
@@ -18,6 +31,13 @@ pub mod registry;
 mod validate;
 
 pub use messages::*;
+
+/// Lower-case hex SHA-256 of `bytes`: how blobs are named and checked everywhere (registry
+/// artifacts, announced policy weights).
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::{Digest, Sha256};
+    hex::encode(Sha256::digest(bytes))
+}
 pub use validate::ValidationError;
 
 /// Version of the wire format. Bump it whenever a message's layout changes; a peer that sends another

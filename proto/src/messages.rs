@@ -6,17 +6,6 @@ use serde::{Deserialize, Serialize};
 
 use crate::{WIRE_VERSION, WireMessage};
 
-macro_rules! wire_message {
-    ($ty:ty, $name:literal) => {
-        impl WireMessage for $ty {
-            const NAME: &'static str = $name;
-            fn wire_version(&self) -> u32 {
-                self.wire_version
-            }
-        }
-    };
-}
-
 /// Statistics of one finished episode, reported by the actor that ran it.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct EpisodeStats {

@@ -21,17 +21,6 @@ use serde::{Deserialize, Serialize};
 use crate::keys::validate_segment;
 use crate::{WIRE_VERSION, WireMessage};
 
-macro_rules! wire_message {
-    ($ty:ty, $name:literal) => {
-        impl WireMessage for $ty {
-            const NAME: &'static str = $name;
-            fn wire_version(&self) -> u32 {
-                self.wire_version
-            }
-        }
-    };
-}
-
 /// The queryable operations under `l3p/registry/<op>` (see [`crate::keys::registry`]).
 pub const OPS: [&str; 7] = ["list", "show", "pull", "lineage", "history", "put", "tag"];
 

@@ -28,7 +28,6 @@ use l3p_proto::registry::{
 };
 use rusqlite::{Connection, OpenFlags, OptionalExtension, TransactionBehavior, params};
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
 
 use crate::error::{RegistryError, sql};
 
@@ -252,10 +251,8 @@ impl std::fmt::Debug for Registry {
     }
 }
 
-/// Hex sha256 of `bytes`.
-pub fn sha256_hex(bytes: &[u8]) -> String {
-    hex::encode(Sha256::digest(bytes))
-}
+/// Hex sha256 of `bytes` (one helper for the whole project, in `proto`).
+pub use l3p_proto::sha256_hex;
 
 fn now_ms() -> u64 {
     SystemTime::now()
