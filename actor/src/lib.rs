@@ -32,7 +32,6 @@ use tracing::{info, warn};
 use zenoh::Session;
 
 use announce::{AnnounceTracker, Next};
-use zenoh::qos::CongestionControl;
 
 /// What the actor needs from a vectorised environment.
 pub trait RolloutEnv: Send + 'static {
@@ -400,11 +399,12 @@ pub async fn run<E: RolloutEnv>(
         .declare_subscriber(keys::policy_announce(&opts.run))
         .await
         .map_err(zerr)?;
-    let publisher = session
-        .declare_publisher(keys::rollout(&opts.run, &opts.robot, &opts.actor_id))
-        .congestion_control(CongestionControl::Block)
-        .await
-        .map_err(zerr)?;
+    let publisher = l3p_net::declare_rollout_publisher(
+        &session,
+        keys::rollout(&opts.run, &opts.robot, &opts.actor_id),
+    )
+    .await
+    .map_err(zerr)?;
     let metrics_source = format!("actor-{}-{}", opts.robot, opts.actor_id);
     let metrics_key = keys::metrics(&opts.run, &metrics_source);
 

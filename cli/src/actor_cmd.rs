@@ -6,7 +6,6 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::Args;
 use l3p_actor::ActorOptions;
-use l3p_registry::net;
 
 use crate::config::Config;
 use crate::runtime;
@@ -63,7 +62,7 @@ pub fn run(args: ActorArgs) -> anyhow::Result<()> {
         if args.exit_with_parent {
             cancel_when_stdin_closes(cancel.clone());
         }
-        let session = net::open_session(&config.zenoh).await?;
+        let session = l3p_net::open_session(&config.zenoh).await?;
         // Only asked for a robot neither the catalog nor the data directory has: a missing
         // registry should not hold the actor for the default two minutes.
         let registry = l3p_registry::RegistryClient::new(&session)

@@ -270,7 +270,7 @@ fn learner(a: LearnerBenchArgs) -> anyhow::Result<()> {
 fn deploy(a: DeployBenchArgs) -> anyhow::Result<()> {
     use l3p_deploy::pacer::Pacer;
     use l3p_deploy::stats::Percentiles;
-    use l3p_registry::net::{ZenohSettings, free_loopback_port, open_session};
+    use l3p_net::{ZenohSettings, free_loopback_port, open_session};
     use std::time::{Duration, Instant};
 
     let robot = RobotSpec::by_name(&a.robot)?;

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 #[serde(deny_unknown_fields, default)]
 pub struct Config {
     pub run: RunConfig,
-    pub zenoh: l3p_registry::net::ZenohSettings,
+    pub zenoh: l3p_net::ZenohSettings,
     /// Simulation and locomotion task (terrain, commands, rewards, noise, randomisation).
     pub env: l3p_robots::config::EnvConfig,
     /// Networks: architecture (`mlp` | `l3p`), latent sizes, hidden sizes, recovery modules.

@@ -8,12 +8,12 @@ use std::time::Duration;
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use l3p_deploy::{DeployOptions, SimRobotOptions};
+use l3p_net::{ZenohSettings, open_session};
 use l3p_policy::{ExportConfig, cpu_device};
 use l3p_proto::{
     ControlMode, DeployStatus, OperatorAction, OperatorCommand, WIRE_VERSION, codec, keys,
 };
 use l3p_registry::RegistryClient;
-use l3p_registry::net::{ZenohSettings, open_session};
 use l3p_robots::catalog::RobotSpec as Robot;
 
 use crate::config::Config;

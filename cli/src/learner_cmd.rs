@@ -4,7 +4,6 @@ use std::path::PathBuf;
 
 use clap::Args;
 use l3p_learner::daemon::{self, LearnerOptions};
-use l3p_registry::net;
 
 use crate::config::Config;
 use crate::runtime;
@@ -63,7 +62,7 @@ pub fn run(args: LearnerArgs) -> anyhow::Result<()> {
     let opts = learner_options(&config, args.registry)?;
     runtime::tokio_runtime()?.block_on(async move {
         let cancel = runtime::cancel_on_signal();
-        let session = net::open_session(&config.zenoh).await?;
+        let session = l3p_net::open_session(&config.zenoh).await?;
         let summary = daemon::run(session, opts, cancel, None).await?;
         println!(
             "learner stopped at iteration {} ({} stale chunks dropped, {} rejected)",

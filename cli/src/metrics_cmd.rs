@@ -4,8 +4,8 @@ use std::io::BufRead;
 use std::path::PathBuf;
 
 use clap::Args;
+use l3p_net::ZenohSettings;
 use l3p_proto::{MetricsRecord, codec, keys};
-use l3p_registry::net::{self, ZenohSettings};
 
 use crate::runtime;
 
@@ -86,7 +86,7 @@ pub fn run(args: MetricsArgs) -> anyhow::Result<()> {
     }
     runtime::tokio_runtime()?.block_on(async move {
         let cancel = runtime::cancel_on_signal();
-        let session = net::open_session(&settings).await?;
+        let session = l3p_net::open_session(&settings).await?;
         let subscriber = session
             .declare_subscriber(keys::metrics_all(&args.run))
             .await

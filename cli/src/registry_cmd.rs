@@ -9,7 +9,7 @@ use std::sync::Arc;
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
-use l3p_registry::net::{ZenohSettings, open_session};
+use l3p_net::{ZenohSettings, open_session};
 use l3p_registry::{
     AliasEvent, ArtifactKind, ArtifactMeta, LineageGraph, LineageRole, ListFilter, PutOutcome,
     PutRequest, Registry, RegistryClient, TagOutcome,

@@ -10,7 +10,7 @@ use std::time::Duration;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
 use l3p_learner::daemon;
-use l3p_registry::net::{self, ZenohSettings};
+use l3p_net::ZenohSettings;
 use tracing::{info, warn};
 
 use crate::config::Config;
@@ -337,11 +337,11 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         // Zenoh's usual port when it is free, so `l3p metrics --follow` in another terminal finds
         // the run, else any free one. Binding is the test: a probe-then-bind could lose the port to
         // another `l3p train` starting at the same moment.
-        let (session, port) = match net::open_session(&ZenohSettings::loopback(Some(7447), &[])).await {
+        let (session, port) = match l3p_net::open_session(&ZenohSettings::loopback(Some(7447), &[])).await {
             Ok(session) => (session, 7447),
             Err(_) => {
-                let port = net::free_loopback_port()?;
-                (net::open_session(&ZenohSettings::loopback(Some(port), &[])).await?, port)
+                let port = l3p_net::free_loopback_port()?;
+                (l3p_net::open_session(&ZenohSettings::loopback(Some(port), &[])).await?, port)
             }
         };
         std::fs::write(

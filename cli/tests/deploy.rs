@@ -12,8 +12,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use common::{Procs, log_tails, wait_for_port};
+use l3p_net::{ZenohSettings, free_loopback_port, open_session};
 use l3p_proto::{ControlMode, DeployStatus, RobotCommand, codec, keys};
-use l3p_registry::net::{ZenohSettings, free_loopback_port, open_session};
 
 fn trained_policy() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session7/policy/policy.safetensors")

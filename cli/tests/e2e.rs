@@ -13,8 +13,8 @@ use std::time::{Duration, Instant};
 mod common;
 
 use common::{Procs, log_tails, wait_for_port};
+use l3p_net::{ZenohSettings, free_loopback_port, open_session};
 use l3p_proto::{MetricsRecord, RolloutChunk, codec, keys};
-use l3p_registry::net::{ZenohSettings, free_loopback_port, open_session};
 
 const RUN: &str = "e2e";
 

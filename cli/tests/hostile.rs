@@ -11,12 +11,12 @@ use std::time::Duration;
 mod common;
 
 use common::{Procs, log_tails, wait_for_port};
+use l3p_net::{ZenohSettings, free_loopback_port, open_session};
 use l3p_proto::registry::{ErrorReply, OPS};
 use l3p_proto::{
     ControlMode, DeployStatus, OperatorAction, OperatorCommand, RobotCommand, RobotState,
     WIRE_VERSION, codec, keys,
 };
-use l3p_registry::net::{ZenohSettings, free_loopback_port, open_session};
 
 /// A small deterministic generator (xorshift), so a failure replays exactly.
 struct Rng(u64);

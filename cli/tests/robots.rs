@@ -185,7 +185,7 @@ fn an_actor_elsewhere_fetches_an_added_robot_from_the_registry() {
     let (ok, out) = l3p(&["robots", "add", "yard_dog.urdf"], &home);
     assert!(ok && out.contains("registry: robot-yard_dog@1"), "{out}");
 
-    let port = l3p_registry::net::free_loopback_port().unwrap();
+    let port = l3p_net::free_loopback_port().unwrap();
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let logs = dir.path();
     let mut procs = Procs(Vec::new());
@@ -298,7 +298,7 @@ fn a_policy_trained_for_an_added_robot_deploys_to_its_simulated_robot() {
     let (ok, out) = l3p(&["train", "porch.toml", "--quiet"], cwd);
     assert!(ok, "{out}");
 
-    let port = l3p_registry::net::free_loopback_port().unwrap();
+    let port = l3p_net::free_loopback_port().unwrap();
     let endpoint = format!("tcp/127.0.0.1:{port}");
     let mut procs = Procs(Vec::new());
     let data = cwd.join("l3p-data");
@@ -339,7 +339,7 @@ fn a_policy_trained_for_an_added_robot_deploys_to_its_simulated_robot() {
     assert!(!out.contains("panicked"), "{out}");
 
     let deploy_port = loop {
-        let p = l3p_registry::net::free_loopback_port().unwrap();
+        let p = l3p_net::free_loopback_port().unwrap();
         if p != port {
             break p;
         }

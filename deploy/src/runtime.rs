@@ -19,7 +19,6 @@ use l3p_robots::catalog::RobotSpec;
 use tokio_util::sync::CancellationToken;
 use tracing::{info, warn};
 use zenoh::Wait;
-use zenoh::qos::{CongestionControl, Priority};
 
 use crate::DeployError;
 use crate::artifact::LoadedPolicy;
@@ -89,11 +88,7 @@ pub async fn run_deploy(
             .await
             .map_err(zerr)?
     };
-    let commands = session
-        .declare_publisher(keys::robot_command(&opts.robot_id))
-        .priority(Priority::RealTime)
-        .express(true)
-        .congestion_control(CongestionControl::Drop)
+    let commands = l3p_net::declare_control_publisher(session, keys::robot_command(&opts.robot_id))
         .await
         .map_err(zerr)?;
     let status_pub = session

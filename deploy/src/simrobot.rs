@@ -19,7 +19,6 @@ use serde::{Deserialize, Serialize};
 use tokio_util::sync::CancellationToken;
 use tracing::{info, warn};
 use zenoh::Wait;
-use zenoh::qos::{CongestionControl, Priority};
 
 use crate::DeployError;
 use crate::controller::tilt_degrees;
@@ -92,11 +91,7 @@ pub async fn run_sim_robot(
         None,
     )
     .await?;
-    let states = session
-        .declare_publisher(keys::robot_state(&opts.robot_id))
-        .priority(Priority::RealTime)
-        .express(true)
-        .congestion_control(CongestionControl::Drop)
+    let states = l3p_net::declare_control_publisher(session, keys::robot_state(&opts.robot_id))
         .await
         .map_err(zerr)?;
 

@@ -15,7 +15,6 @@
 
 mod client;
 mod error;
-pub mod net;
 mod service;
 mod store;
 

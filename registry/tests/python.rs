@@ -6,7 +6,7 @@ use std::process::Command;
 use std::sync::Arc;
 use std::time::Duration;
 
-use l3p_registry::net::{ZenohSettings, free_loopback_port, open_session};
+use l3p_net::{ZenohSettings, free_loopback_port, open_session};
 use l3p_registry::{ArtifactKind, PutRequest, Registry, ServiceLimits, serve_with};
 use tokio_util::sync::CancellationToken;
 

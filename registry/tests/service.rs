@@ -5,9 +5,9 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use l3p_net::{ZenohSettings, free_loopback_port, open_session};
 use l3p_proto::registry::{ErrorCode, ErrorReply, PutHeader};
 use l3p_proto::{WIRE_VERSION, codec, keys};
-use l3p_registry::net::{ZenohSettings, free_loopback_port, open_session};
 use l3p_registry::{
     ArtifactKind, ArtifactSpec, LineageRole, ListFilter, PutRequest, Registry, RegistryClient,
     RegistryError, ServiceLimits, serve_with, sha256_hex,

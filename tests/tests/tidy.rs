@@ -9,19 +9,30 @@ use std::path::{Path, PathBuf};
 /// Project crate → the project crates its `[dependencies]` may name.
 const ALLOWED: &[(&str, &[&str])] = &[
     ("l3p-proto", &[]),
+    ("l3p-net", &[]),
     ("l3p-robots", &[]),
     ("l3p-policy", &[]),
     ("l3p-registry", &["l3p-proto"]),
     ("l3p-learner", &["l3p-proto", "l3p-policy", "l3p-registry"]),
-    ("l3p-actor", &["l3p-proto", "l3p-policy", "l3p-robots"]),
+    (
+        "l3p-actor",
+        &["l3p-proto", "l3p-net", "l3p-policy", "l3p-robots"],
+    ),
     (
         "l3p-deploy",
-        &["l3p-proto", "l3p-policy", "l3p-robots", "l3p-registry"],
+        &[
+            "l3p-proto",
+            "l3p-net",
+            "l3p-policy",
+            "l3p-robots",
+            "l3p-registry",
+        ],
     ),
     (
         "l3p-cli",
         &[
             "l3p-proto",
+            "l3p-net",
             "l3p-robots",
             "l3p-policy",
             "l3p-learner",

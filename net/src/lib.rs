@@ -1,6 +1,9 @@
-//! Zenoh session set-up shared by every l3p process ([`ZenohSettings`] → [`open_session`]). It lives in
-//! the registry crate because that is the lowest crate that speaks Zenoh and every daemon (learner,
-//! actor, deploy) already depends on the registry client.
+//! How every l3p process joins the Zenoh network: [`ZenohSettings`] (the `[zenoh]` config section)
+//! → [`open_session`], and the project's two publisher profiles ([`declare_control_publisher`],
+//! [`declare_rollout_publisher`]). A crate of its own so that the actor and the deploy controller
+//! speak Zenoh without linking the registry's SQLite store.
+//!
+//! Architecture invariant: depends on no other project crate.
 
 use std::path::PathBuf;
 
@@ -97,6 +100,36 @@ pub async fn open_session(settings: &ZenohSettings) -> Result<zenoh::Session, Ne
     zenoh::open(config)
         .await
         .map_err(|e| NetError::Open(e.to_string()))
+}
+
+/// The project's two publisher profiles, declared in one place.
+///
+/// - Control (`robot/<id>/command`, `robot/<id>/state`): real-time priority, express, and `Drop`
+///   under congestion — a late command or state is worse than none, the next one replaces it.
+/// - Rollouts (`<run>/rollout/...`): `Block` under congestion — training data is never dropped on
+///   the way; a slow learner slows the actors instead.
+pub async fn declare_control_publisher(
+    session: &zenoh::Session,
+    key: String,
+) -> zenoh::Result<zenoh::pubsub::Publisher<'static>> {
+    use zenoh::qos::{CongestionControl, Priority};
+    session
+        .declare_publisher(key)
+        .priority(Priority::RealTime)
+        .express(true)
+        .congestion_control(CongestionControl::Drop)
+        .await
+}
+
+/// See [`declare_control_publisher`]: the rollout profile.
+pub async fn declare_rollout_publisher(
+    session: &zenoh::Session,
+    key: String,
+) -> zenoh::Result<zenoh::pubsub::Publisher<'static>> {
+    session
+        .declare_publisher(key)
+        .congestion_control(zenoh::qos::CongestionControl::Block)
+        .await
 }
 
 /// A TCP port on 127.0.0.1 that was free a moment ago (for loopback sessions in local mode and tests).
