@@ -11,22 +11,12 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use common::{Procs, log_tails, wait_for_port};
+use common::{Procs, deploy_endpoint, log_tails, wait_for_port};
 use l3p_net::{ZenohSettings, free_loopback_port, open_session};
 use l3p_proto::{ControlMode, DeployStatus, RobotCommand, codec, keys};
 
 fn trained_policy() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session7/policy/policy.safetensors")
-}
-
-/// A free loopback port other than `taken`, and its endpoint, for the controller to listen on.
-fn deploy_endpoint(taken: u16) -> (u16, String) {
-    loop {
-        let port = free_loopback_port().unwrap();
-        if port != taken {
-            return (port, format!("tcp/127.0.0.1:{port}"));
-        }
-    }
 }
 
 /// What the test saw on the robot's keys, in arrival order.

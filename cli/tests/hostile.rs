@@ -10,7 +10,7 @@ use std::time::Duration;
 
 mod common;
 
-use common::{Procs, log_tails, wait_for_port};
+use common::{Procs, deploy_endpoint, log_tails, wait_for_port};
 use l3p_net::{ZenohSettings, free_loopback_port, open_session};
 use l3p_proto::registry::{ErrorReply, OPS};
 use l3p_proto::{
@@ -187,13 +187,7 @@ async fn live_daemons_survive_hostile_input_and_count_it() {
         d,
     );
     wait_for_port(port, Duration::from_secs(60), "the registry", d);
-    let deploy_port = loop {
-        let p = free_loopback_port().unwrap();
-        if p != port {
-            break p;
-        }
-    };
-    let deploy_ep = format!("tcp/127.0.0.1:{deploy_port}");
+    let (deploy_port, deploy_ep) = deploy_endpoint(port);
     procs.spawn(
         "deploy",
         &[

@@ -8,7 +8,7 @@ use std::path::Path;
 use std::process::Command;
 
 mod common;
-use common::{Procs, TINY_FLAT_TASK, log_tails, wait_for_port};
+use common::{Procs, TINY_FLAT_TASK, deploy_endpoint, log_tails, wait_for_port};
 
 fn l3p(args: &[&str], cwd: &Path) -> (bool, String) {
     let out = Command::new(env!("CARGO_BIN_EXE_l3p"))
@@ -338,13 +338,7 @@ fn a_policy_trained_for_an_added_robot_deploys_to_its_simulated_robot() {
     );
     assert!(!out.contains("panicked"), "{out}");
 
-    let deploy_port = loop {
-        let p = l3p_net::free_loopback_port().unwrap();
-        if p != port {
-            break p;
-        }
-    };
-    let deploy_ep = format!("tcp/127.0.0.1:{deploy_port}");
+    let (deploy_port, deploy_ep) = deploy_endpoint(port);
     procs.spawn_split_in_dir(
         "deploy",
         &[

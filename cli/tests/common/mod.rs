@@ -125,6 +125,16 @@ pub fn wait_for_port(port: u16, timeout: std::time::Duration, what: &str, log_di
     }
 }
 
+/// A free loopback port other than `taken`, and its endpoint, for the controller to listen on.
+pub fn deploy_endpoint(taken: u16) -> (u16, String) {
+    loop {
+        let port = l3p_net::free_loopback_port().unwrap();
+        if port != taken {
+            return (port, format!("tcp/127.0.0.1:{port}"));
+        }
+    }
+}
+
 /// The last lines of every process log, for failure messages.
 pub fn log_tails(dir: &Path) -> String {
     let mut out = String::new();
