@@ -84,11 +84,18 @@ pub struct PhysicsPins {
     /// Keep the config's pushes during evaluation (off by default: pushes are a training aid).
     #[arg(long)]
     pub pushes: bool,
+    /// Physics step (s), the control step kept: e.g. 0.005 plays a policy trained at 20 ms × 1 at
+    /// IsaacLab's 5 ms × 4 (does it rely on the coarse step?).
+    #[arg(long)]
+    pub physics_dt: Option<f32>,
 }
 
 impl PhysicsPins {
-    /// Writes the pins into `[env.randomization]` overrides.
-    pub fn apply(&self, env: &mut l3p_robots::config::EnvConfig) {
+    /// Writes the pins into `[env.randomization]` overrides (and the physics step into `[env]`).
+    pub fn apply(&self, env: &mut l3p_robots::config::EnvConfig) -> anyhow::Result<()> {
+        if let Some(dt) = self.physics_dt {
+            env.set_physics_dt(dt)?;
+        }
         let r = &mut env.randomization;
         let pin = |v: Option<f32>| v.map(|x| [x, x]);
         if let Some(v) = pin(self.joint_damping) {
@@ -119,6 +126,7 @@ impl PhysicsPins {
         if !self.pushes {
             r.pushes = Some(false);
         }
+        Ok(())
     }
 }
 
@@ -229,7 +237,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         constant_forward_command(&mut config.env, range[0]);
         config.env.commands.lin_vel_x = [range[0], range[1]];
     }
-    args.pins.apply(&mut config.env);
+    args.pins.apply(&mut config.env)?;
     let robot = l3p_robots::catalog::RobotSpec::by_name(&args.robot)?;
     let speeds: Vec<Option<f32>> = match &args.forward {
         Some(v) if v.iter().any(|x| !x.is_finite()) => {

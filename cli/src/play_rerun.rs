@@ -75,7 +75,7 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
         None => Config::default(),
     };
     config.env.terrain.preset = crate::eval_cmd::terrain_preset(&args.terrain)?;
-    args.pins.apply(&mut config.env);
+    args.pins.apply(&mut config.env)?;
     let schedule = args.schedule()?;
     let mut scene_policies = Vec::new();
     for entry in scene(&args.robot, &args.policy)? {

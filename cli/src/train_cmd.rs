@@ -43,7 +43,8 @@ pub struct TrainingFlags {
     #[arg(long)]
     pub quiet: bool,
     /// Time to walk: every --eval-every iterations evaluate the latest checkpoint against the walk
-    /// criterion (forward 0.5 and 1.0 m/s, joint damping at the top of its randomisation range; 0.5
+    /// criterion (forward 0.5 and 1.0 m/s, joint damping at the top of its randomisation range,
+    /// physics at 5 ms whatever the training's step; 0.5
     /// only once 1.0 passes) and stop as soon as it holds (every check is appended to `<run_dir>/walk_checks.jsonl`); prints
     /// and writes `<run_dir>/walk.json` (wall-clock, samples,
     /// iterations, the evaluation).
@@ -122,6 +123,10 @@ const WALK_CHECK_ENVS: usize = 16;
 const WALK_CHECK_SPEEDS: [f32; 2] = [0.5, 1.0];
 /// Seed of the walk checks' simulations (the same every check, so checks compare policies).
 const WALK_CHECK_SEED: u64 = 11;
+/// Physics step (s) of a walk check, whatever the training's: IsaacLab's 5 ms, so that a policy
+/// trained at a coarser step (the shipped A1 configs: 20 ms × 1) walks only if it walks in fine
+/// physics too. Screens run at the training's step (they only decide when to check).
+pub const WALK_CHECK_PHYSICS_DT: f32 = 0.005;
 
 /// Envs (and 5 s episodes) of a walk screen.
 const SCREEN_ENVS: usize = 8;
@@ -142,9 +147,10 @@ struct WalkCheck {
 
 /// Evaluates `<run_dir>/checkpoints/latest.ckpt` on the first actor's robot against the walk
 /// criterion: forward 0.5 and 1.0 m/s, joint damping pinned at the top of the training range,
-/// pushes off, the rest of the training randomisation on.
+/// pushes off, the rest of the training randomisation on, physics at [`WALK_CHECK_PHYSICS_DT`].
 fn walk_check(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<WalkCheck> {
-    let (iteration, robot, policy, env) = walk_setup(config, run_dir)?;
+    let (iteration, robot, policy, mut env) = walk_setup(config, run_dir)?;
+    env.set_physics_dt(WALK_CHECK_PHYSICS_DT)?;
     let mut rows = Vec::new();
     // The harder speed first: while it fails (most checks) the other is not run, which halves a
     // failing check's cost — checks share the training's cores (BENCHMARKS.md "session 10").
@@ -191,7 +197,7 @@ fn walk_setup(
         joint_damping: Some(top_damping),
         ..Default::default()
     }
-    .apply(&mut env);
+    .apply(&mut env)?;
     Ok((iteration, robot, policy, env))
 }
 
@@ -555,6 +561,7 @@ fn record_walk_check(check: &WalkCheck, wall_seconds: f64, run_dir: &std::path::
     let line = serde_json::json!({
         "iteration": check.iteration,
         "wall_seconds": wall_seconds,
+        "physics_dt_ms": (WALK_CHECK_PHYSICS_DT * 1000.0).round(),
         "rows": check.rows,
     });
     if let Err(e) = append_line(&run_dir.join("walk_checks.jsonl"), &line.to_string()) {
@@ -643,6 +650,7 @@ fn report_walk(
                 "iteration": check.iteration,
                 "wall_clock_s": seconds,
                 "samples": check.iteration * samples_per_iteration,
+                "physics_dt_ms": (WALK_CHECK_PHYSICS_DT * 1000.0).round(),
                 "rows": check.rows,
             })
         }

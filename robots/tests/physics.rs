@@ -338,50 +338,55 @@ fn repeated_mass_randomisation_does_not_compound() {
     );
 }
 
-/// The shipped A1 configs step physics at 10 ms × 2 instead of IsaacLab's 5 ms × 4 (half the
-/// simulation cost). Every robot must stand there as it does at 5 ms, with both gain sets, and gain
-/// no energy: after 2 s its base moves no faster than at 5 ms (soft training gains still sag
-/// slowly at either step).
+/// The shipped A1 configs step physics at 20 ms × 1 (the rough one at 10 ms × 2) instead of
+/// IsaacLab's 5 ms × 4: a quarter of the simulation cost. Every robot must stand there as it does at
+/// 5 ms, with both gain sets, and gain no energy: after 2 s its base moves no faster than at 5 ms
+/// (soft training gains still sag slowly at any step). Within 3% of the 5 ms height at 10 ms; at
+/// 20 ms the heavy robots under their soft training gains stand up to 5% lower (measured: ANYmal-D
+/// at kp 80 0.519 m against 0.542 m, A1 within 1%).
 #[test]
-fn ten_ms_physics_stands_like_five_ms() {
+fn coarse_physics_stands_like_five_ms() {
     let fine = SimConfig::default();
-    let coarse = SimConfig {
-        dt: 0.01,
-        ..SimConfig::default()
-    };
-    for spec in RobotSpec::all() {
-        for gains in [spec.stand_gains, spec.training_gains] {
-            let (a, _) = stand(spec, gains, 2.0, fine);
-            let (b, _) = stand(spec, gains, 2.0, coarse);
-            assert!(b.is_finite(), "{}: non-finite at 10 ms", spec.name);
-            let (za, zb) = (a.base_pos[2], b.base_pos[2]);
-            assert!(
-                (za - zb).abs() / za < 0.03,
-                "{} kp {}: base {za:.3} m at 5 ms, {zb:.3} m at 10 ms",
-                spec.name,
-                gains.kp
-            );
-            let speed = |s: &SimState| s.base_lin_vel_w.iter().map(|v| v * v).sum::<f32>().sqrt();
-            println!(
-                "{:9} kp {:>5}: base {za:.3} / {zb:.3} m, speed {:.4} / {:.4} m/s (5 / 10 ms)",
-                spec.name,
-                gains.kp,
-                speed(&a),
-                speed(&b)
-            );
-            assert!(
-                speed(&b) < 1.5 * speed(&a) + 0.01,
-                "{} kp {}: still moving at {} m/s (5 ms: {})",
-                spec.name,
-                gains.kp,
-                speed(&b),
-                speed(&a)
-            );
-            assert!(
-                projected_gravity(b.base_quat)[2] < -0.97,
-                "{}: tipped",
-                spec.name
-            );
+    for (dt, height_tolerance) in [(0.01, 0.03), (0.02, 0.05)] {
+        let coarse = SimConfig {
+            dt,
+            ..SimConfig::default()
+        };
+        for spec in RobotSpec::all() {
+            for gains in [spec.stand_gains, spec.training_gains] {
+                let (a, _) = stand(spec, gains, 2.0, fine);
+                let (b, _) = stand(spec, gains, 2.0, coarse);
+                assert!(b.is_finite(), "{}: non-finite at {dt} s", spec.name);
+                let (za, zb) = (a.base_pos[2], b.base_pos[2]);
+                assert!(
+                    (za - zb).abs() / za < height_tolerance,
+                    "{} kp {}: base {za:.3} m at 5 ms, {zb:.3} m at {dt} s",
+                    spec.name,
+                    gains.kp
+                );
+                let speed =
+                    |s: &SimState| s.base_lin_vel_w.iter().map(|v| v * v).sum::<f32>().sqrt();
+                println!(
+                    "{:9} kp {:>5}: base {za:.3} / {zb:.3} m, speed {:.4} / {:.4} m/s (5 ms / {dt} s)",
+                    spec.name,
+                    gains.kp,
+                    speed(&a),
+                    speed(&b)
+                );
+                assert!(
+                    speed(&b) < 1.5 * speed(&a) + 0.01,
+                    "{} kp {}: still moving at {} m/s after 2 s at {dt} s (5 ms: {})",
+                    spec.name,
+                    gains.kp,
+                    speed(&b),
+                    speed(&a)
+                );
+                assert!(
+                    projected_gravity(b.base_quat)[2] < -0.97,
+                    "{}: tipped at {dt} s",
+                    spec.name
+                );
+            }
         }
     }
 }
