@@ -3,21 +3,25 @@
 //! Main types: [`PpoConfig`] (every hyperparameter, rsl_rl defaults), [`Mode`], [`Ppo`] (model +
 //! Adam + learning rate + iteration; [`Ppo::update`]), [`UpdateMetrics`].
 //!
-//! One update reads top to bottom:
-//! 1. values `V(s_t)` and `V(s_T)` of the batch under the current critic;
-//! 2. GAE with time-out bootstrapping ([`crate::gae`]), advantages normalised per robot over the
-//!    whole batch (rsl_rl normalises over its batch; one robot = one batch);
-//! 3. `R_obs` reconstruction error on observations not trained on yet (the fresh batch);
-//! 4. one random permutation per robot, reused by every epoch (rsl_rl; with `smoothness_coef` > 0
-//!    a permutation of whole env segments, so that neighbours in time share a minibatch); `epochs ×
-//!    minibatches`:
-//!    each minibatch takes the k-th slice of every robot's permutation, runs every robot through its
-//!    adapters and the shared core, computes the KL to the behaviour policy and adapts the learning
-//!    rate *before* the step, the clipped surrogate, the clipped value loss, the entropy bonus and
-//!    `λ (L_rec_obs + L_rec_act)`, with `symmetry_coef` > 0 the mirror loss on the same minibatch
-//!    mirrored left-right ([`Mirror`]), with `smoothness_coef` > 0 the temporal smoothness loss on
-//!    the minibatch's own means at consecutive steps of an episode, back-propagates, clips the
-//!    global gradient norm and steps Adam.
+//! One update ([`Ppo::update`]) reads top to bottom:
+//! 1. `check_batch`: every robot's rollout against the model and the config;
+//! 2. `prepare`: values `V(s_t)` and `V(s_T)` under the current critic, GAE with time-out
+//!    bootstrapping ([`crate::gae`]), advantages normalised per robot over the whole batch (rsl_rl
+//!    normalises over its batch; one robot = one batch), and one split of each robot's rollout into
+//!    minibatches ([`RobotRollout::minibatches`](crate::storage::RobotRollout::minibatches)) reused
+//!    by every epoch (rsl_rl; with `smoothness_coef` > 0 whole env segments, so that neighbours in
+//!    time share a minibatch);
+//! 3. `recon_error`: `R_obs` reconstruction error on observations not trained on yet (the fresh
+//!    batch);
+//! 4. `epochs × minibatches` of `minibatch_step`: the k-th minibatch of every robot through its
+//!    adapters and the shared core; per robot `minibatch_loss` (the clipped surrogate, the clipped
+//!    value loss, the entropy bonus, `λ (L_rec_obs + L_rec_act)`, with `symmetry_coef` > 0 the
+//!    mirror loss on the same minibatch mirrored left-right ([`Mirror`]), with `smoothness_coef` > 0
+//!    the temporal smoothness of the minibatch's own means at consecutive steps of an episode) and
+//!    its parts; the KL to the behaviour policy adapts the learning rate *before* the step;
+//!    back-propagation, the global gradient norm clipped, Adam; the parts summed into an
+//!    `UpdateAccumulator`;
+//! 5. `check_progress`: an update whose every step was non-finite counts towards an error.
 
 use std::time::Instant;
 
@@ -25,7 +29,7 @@ use burn::module::{Module, ModuleVisitor, Param, ParamId};
 use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Int, Tensor, TensorData};
 use l3p_policy::{
-    Arch, PolicyModel, PolicyNet, gaussian_entropy, gaussian_log_prob, tensor_to_vec,
+    ActorOut, Arch, PolicyModel, PolicyNet, gaussian_entropy, gaussian_log_prob, tensor_to_vec,
 };
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -34,7 +38,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::LearnerError;
 use crate::gae::{compute_gae, explained_variance, normalize};
-use crate::storage::RolloutBatch;
+use crate::storage::{MinibatchSplit, Minibatches, RolloutBatch};
 
 /// Training mode (paper baselines).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
@@ -296,14 +300,10 @@ pub struct UpdateMetrics {
 /// Per-robot data prepared for minibatching.
 struct Prepared {
     robot: usize,
-    /// Minibatch size (samples).
-    mb: usize,
-    obs_dim: usize,
-    act_dim: usize,
-    adv: Vec<f32>,
-    ret: Vec<f32>,
+    advantages: Vec<f32>,
+    returns: Vec<f32>,
     values: Vec<f32>,
-    perm: Vec<usize>,
+    minibatches: Minibatches,
 }
 
 /// Left-right mirror maps of one robot's observation and action (`out[i] = sign[i] · in[index[i]]`;
@@ -560,11 +560,71 @@ impl Ppo {
     /// One PPO update on `batch` (see the module docs for the order of operations).
     pub fn update(&mut self, batch: &RolloutBatch) -> Result<UpdateMetrics, LearnerError> {
         let start = Instant::now();
-        let cfg = self.cfg.clone();
+        let index = self.check_batch(batch)?;
+        let net_eval = self.model.net.valid();
+        let (prepared, explained_variance) = self.prepare(&net_eval, batch, &index)?;
+        let (recon_mse, recon_baseline_mse) = self.recon_error(&net_eval, batch, &index)?;
+        drop(net_eval);
+
+        let mut acc = UpdateAccumulator::default();
+        for _epoch in 0..self.cfg.num_learning_epochs {
+            for k in 0..self.cfg.num_mini_batches {
+                match self.minibatch_step(batch, &prepared, k)? {
+                    Some((parts, grad_norm)) => acc.add(&parts, grad_norm),
+                    None => acc.skipped += 1,
+                }
+            }
+        }
+        self.iteration += 1;
+        self.check_progress(&acc)?;
+
+        let mut std_sum = 0f32;
+        let mut std_n = 0usize;
+        for &i in &index {
+            let s = tensor_to_vec(self.model.net.robots[i].std().detach())?;
+            std_sum += s.iter().sum::<f32>();
+            std_n += s.len();
+        }
+        let samples = batch.samples();
+        let secs = start.elapsed().as_secs_f32();
+        let reward_sum: f32 = batch
+            .robots
+            .iter()
+            .map(|r| r.rewards.iter().sum::<f32>())
+            .sum();
+        let mean = acc.mean();
+        Ok(UpdateMetrics {
+            iteration: self.iteration,
+            samples,
+            approx_kl: mean.kl,
+            clip_fraction: mean.clip_fraction,
+            explained_variance,
+            learning_rate: self.lr,
+            entropy: mean.entropy,
+            mean_std: std_sum / std_n.max(1) as f32,
+            surrogate_loss: mean.surrogate,
+            value_loss: mean.value,
+            rec_obs_loss: mean.rec_obs,
+            rec_act_loss: mean.rec_act,
+            symmetry_loss: mean.symmetry,
+            smoothness_loss: mean.smoothness,
+            total_loss: mean.total,
+            grad_norm: acc.grad_norm / acc.steps.max(1) as f32,
+            skipped_steps: acc.skipped,
+            recon_mse,
+            recon_baseline_mse,
+            mean_reward: reward_sum / samples.max(1) as f32,
+            update_seconds: secs,
+            samples_per_second: samples as f32 / secs.max(1e-9),
+        })
+    }
+
+    /// Validates every robot's rollout against the model and the config; the model index of each.
+    fn check_batch(&self, batch: &RolloutBatch) -> Result<Vec<usize>, LearnerError> {
+        let cfg = &self.cfg;
         if batch.robots.is_empty() {
             return Err(LearnerError::Batch("empty batch".into()));
         }
-        // Validate and map robots.
         let mut index = Vec::with_capacity(batch.robots.len());
         for (k, r) in batch.robots.iter().enumerate() {
             r.validate()?;
@@ -605,15 +665,30 @@ impl Ppo {
             }
             index.push(i);
         }
+        Ok(index)
+    }
 
-        // 1-2. Values, GAE, advantage normalisation.
-        let net_eval = self.model.net.valid();
+    /// Steps 1, 2 and the split of 4: values, GAE returns and normalised advantages of every
+    /// robot, and its minibatches; the explained variance of the values over the whole batch.
+    fn prepare(
+        &mut self,
+        net: &PolicyNet,
+        batch: &RolloutBatch,
+        index: &[usize],
+    ) -> Result<(Vec<Prepared>, f32), LearnerError> {
+        // With the smoothness loss a minibatch is whole env segments, so each sample's
+        // neighbours in time share its forward pass.
+        let split = if self.cfg.smoothness_coef > 0.0 {
+            MinibatchSplit::EnvSegments
+        } else {
+            MinibatchSplit::Samples
+        };
         let mut prepared = Vec::with_capacity(batch.robots.len());
-        let (mut ev_values, mut ev_returns) = (Vec::new(), Vec::new());
-        for (r, &i) in batch.robots.iter().zip(&index) {
-            let values = self.values(&net_eval, i, &r.observations, r.obs_dim)?;
-            let last = self.values(&net_eval, i, &r.last_observations, r.obs_dim)?;
-            let (mut adv, ret) = compute_gae(
+        let (mut all_values, mut all_returns) = (Vec::new(), Vec::new());
+        for (r, &i) in batch.robots.iter().zip(index) {
+            let values = self.values(net, i, &r.observations, r.obs_dim)?;
+            let last = self.values(net, i, &r.last_observations, r.obs_dim)?;
+            let (mut advantages, returns) = compute_gae(
                 &r.rewards,
                 &values,
                 &last,
@@ -621,255 +696,221 @@ impl Ppo {
                 &r.truncated,
                 r.steps,
                 r.envs,
-                cfg.gamma,
-                cfg.lam,
+                self.cfg.gamma,
+                self.cfg.lam,
             );
-            normalize(&mut adv);
-            ev_values.extend_from_slice(&values);
-            ev_returns.extend_from_slice(&ret);
-            // With the smoothness loss a minibatch is whole env segments (rsl_rl's recurrent
-            // split), so each sample's neighbours in time share its forward pass; otherwise
-            // samples are shuffled individually, as rsl_rl's feed-forward PPO.
-            let (perm, mb) = if cfg.smoothness_coef > 0.0 {
-                let mut envs: Vec<usize> = (0..r.envs).collect();
-                envs.shuffle(&mut self.rng);
-                let perm = envs
-                    .iter()
-                    .flat_map(|&e| (0..r.steps).map(move |t| t * r.envs + e))
-                    .collect();
-                (perm, (r.envs / cfg.num_mini_batches) * r.steps)
-            } else {
-                let mut perm: Vec<usize> = (0..r.samples()).collect();
-                perm.shuffle(&mut self.rng);
-                (perm, r.samples() / cfg.num_mini_batches)
-            };
+            normalize(&mut advantages);
+            all_values.extend_from_slice(&values);
+            all_returns.extend_from_slice(&returns);
+            let minibatches = r.minibatches(self.cfg.num_mini_batches, split, &mut self.rng);
             prepared.push(Prepared {
                 robot: i,
-                mb,
-                obs_dim: r.obs_dim,
-                act_dim: r.action_dim,
-                adv,
-                ret,
+                advantages,
+                returns,
                 values,
-                perm,
+                minibatches,
             });
         }
+        Ok((prepared, explained_variance(&all_values, &all_returns)))
+    }
 
-        // 3. Reconstruction error of R_obs on fresh observations.
-        let (recon_mse, recon_baseline_mse) = self.recon_error(&net_eval, batch, &index)?;
-        drop(net_eval);
-
-        // 4. Epochs × minibatches.
-        let total: usize = prepared.iter().map(|p| p.mb).sum();
-        let lambda = self.model.config.recovery.lambda;
-        let mut acc = Acc::default();
-        for _epoch in 0..cfg.num_learning_epochs {
-            for k in 0..cfg.num_mini_batches {
-                let acc_before = acc.clone();
-                let mut obs_t = Vec::with_capacity(self.model.robots.len());
-                obs_t.resize_with(self.model.robots.len(), || None);
-                let mut per_robot = Vec::with_capacity(prepared.len());
-                for (p, r) in prepared.iter().zip(&batch.robots) {
-                    let mb = p.mb;
-                    let idx = &p.perm[k * mb..(k + 1) * mb];
-                    let g = Gathered::new(r, p, idx);
-                    obs_t[p.robot] = Some(self.tensor2(g.obs.clone(), mb, p.obs_dim));
-                    let neighbours = (cfg.smoothness_coef > 0.0)
-                        .then(|| NeighbourRows::new(r, idx, cfg.smoothness_order))
-                        .filter(|n| !n.current.is_empty())
-                        .map(|n| n.tensors(&self.device));
-                    per_robot.push((mb, g, neighbours));
-                }
-                let outs = self.model.net.actors(obs_t.clone());
-                // The same minibatch mirrored left-right, for the symmetry loss.
-                let mirrored_outs = (cfg.symmetry_coef > 0.0).then(|| {
-                    let mirrored = obs_t
-                        .iter()
-                        .zip(&self.mirrors)
-                        .map(|(o, m)| match (o, m) {
-                            (Some(o), Some(m)) => Some(m.observations(o.clone())),
-                            _ => None,
-                        })
-                        .collect();
-                    self.model.net.actors(mirrored)
-                });
-                let mut loss_total: Option<Tensor<1>> = None;
-                let mut mb_kl = 0f32;
-                for ((mb, g, neighbours), p) in per_robot.into_iter().zip(&prepared) {
-                    let w = mb as f32 / total as f32;
-                    let out = outs[p.robot]
-                        .clone()
-                        .ok_or_else(|| LearnerError::Batch("missing actor output".into()))?;
-                    let obs = obs_t[p.robot]
-                        .clone()
-                        .ok_or_else(|| LearnerError::Batch("missing observations".into()))?;
-                    let heads = &self.model.net.robots[p.robot];
-                    let actions = self.tensor2(g.actions, mb, p.act_dim);
-                    let old_logp = self.tensor1(g.old_logp);
-                    let old_mu = self.tensor2(g.old_mu, mb, p.act_dim);
-                    let old_sigma = self.tensor2(g.old_sigma, mb, p.act_dim);
-                    let adv = self.tensor1(g.adv);
-                    let ret = self.tensor1(g.ret);
-                    let old_v = self.tensor1(g.old_v);
-
-                    // KL(old ‖ new) as rsl_rl, no gradient.
-                    let mu = out.mean.clone().detach();
-                    let sigma = out.std.clone().detach();
-                    let kl = approx_kl(mu, sigma, old_mu, old_sigma);
-                    let kl = scalar(kl)?;
-                    mb_kl += w * kl;
-
-                    let logp = gaussian_log_prob(actions, out.mean.clone(), out.std.clone());
-                    let entropy = gaussian_entropy(out.std.clone());
-                    let ratio = logp.sub(old_logp).exp();
-                    let ratio_host = tensor_to_vec(ratio.clone().detach())?;
-                    let clipped = ratio_host
-                        .iter()
-                        .filter(|r| (**r - 1.0).abs() > cfg.clip_param)
-                        .count();
-                    acc.clip_fraction += w * clipped as f32 / mb as f32;
-                    let surrogate = surrogate_loss(ratio, adv, cfg.clip_param);
-
-                    let value = heads.value(obs.clone()).squeeze_dim::<1>(1);
-                    let value_loss = value_loss(
-                        value,
-                        old_v,
-                        ret,
-                        cfg.clip_param,
-                        cfg.use_clipped_value_loss,
-                    );
-
-                    let mut loss = surrogate
-                        .clone()
-                        .add(value_loss.clone().mul_scalar(cfg.value_loss_coef))
-                        .sub(entropy.clone().mul_scalar(cfg.entropy_coef));
-                    // Recovery losses (L3P).
-                    if let (Some(r_obs), Some(h)) = (&heads.r_obs, &out.h) {
-                        let l = r_obs.loss(obs.clone(), h.clone(), &mut self.rng);
-                        acc.rec_obs += w * scalar(l.clone().detach())?;
-                        loss = loss.add(l.mul_scalar(lambda));
-                    }
-                    if let (Some(r_act), Some(z)) = (&heads.r_act, &out.z) {
-                        let z_hat = r_act.forward(out.mean.clone());
-                        let l = z_hat.sub(z.clone().detach()).square().mean();
-                        acc.rec_act += w * scalar(l.clone().detach())?;
-                        loss = loss.add(l.mul_scalar(lambda));
-                    }
-                    if let (Some(outs_m), Some(m)) = (&mirrored_outs, &self.mirrors[p.robot]) {
-                        let out_m = outs_m[p.robot]
-                            .as_ref()
-                            .ok_or_else(|| LearnerError::Batch("missing mirrored output".into()))?;
-                        let l = out_m
-                            .mean
-                            .clone()
-                            .sub(m.actions(out.mean.clone()))
-                            .square()
-                            .mean();
-                        acc.symmetry += w * scalar(l.clone().detach())?;
-                        loss = loss.add(l.mul_scalar(cfg.symmetry_coef));
-                    }
-                    if let Some(n) = neighbours {
-                        // μ of each sample's neighbours in time, from this same forward pass.
-                        let at = |rows: &Tensor<1, Int>| out.mean.clone().select(0, rows.clone());
-                        let current = at(&n.current);
-                        let mut diff = at(&n.next).sub(current.clone());
-                        if let Some(prev) = &n.prev {
-                            diff = diff.sub(current.sub(at(prev)));
-                        }
-                        let l = diff.square().mean();
-                        acc.smoothness += w * scalar(l.clone().detach())?;
-                        loss = loss.add(l.mul_scalar(cfg.smoothness_coef));
-                    }
-                    acc.surrogate += w * scalar(surrogate.detach())?;
-                    acc.value += w * scalar(value_loss.detach())?;
-                    acc.entropy += w * scalar(entropy.detach())?;
-                    acc.total += w * scalar(loss.clone().detach())?;
-                    let weighted = loss.mul_scalar(w);
-                    loss_total = Some(match loss_total {
-                        None => weighted,
-                        Some(t) => t.add(weighted),
-                    });
-                }
-                let loss = loss_total.ok_or_else(|| LearnerError::Batch("no loss".into()))?;
-                let grads = loss.backward();
-                let mut grads = GradientsParams::from_grads(grads, &self.model.net);
-                let norm = clip_global_grad_norm(&self.model.net, &mut grads, cfg.max_grad_norm)?;
-                if !(norm.is_finite() && mb_kl.is_finite()) {
-                    // Skip this step: parameters, optimiser state and learning rate untouched,
-                    // the minibatch's losses left out of the metrics.
-                    acc = Acc {
-                        skipped: acc_before.skipped + 1,
-                        ..acc_before
-                    };
-                    continue;
-                }
-                acc.kl += mb_kl;
-                self.lr = cfg.adapt_lr(self.lr, mb_kl);
-                acc.grad_norm += norm;
-                acc.steps += 1;
-                let net = std::mem::replace(&mut self.model.net, placeholder_net());
-                self.model.net = self.optim.step(self.lr, net, grads);
-            }
+    /// One gradient step on minibatch `k` of every robot: the losses summed over robots weighted by
+    /// their share of the minibatch, the global gradient norm clipped, the learning rate adapted to
+    /// the KL, Adam. `None` when the loss or the gradient is not finite: the step is skipped with
+    /// parameters, optimiser state and learning rate untouched.
+    fn minibatch_step(
+        &mut self,
+        batch: &RolloutBatch,
+        prepared: &[Prepared],
+        k: usize,
+    ) -> Result<Option<(LossParts, f32)>, LearnerError> {
+        let total: usize = prepared.iter().map(|p| p.minibatches.size()).sum();
+        let mut obs = vec![None; self.model.robots.len()];
+        let mut inputs = Vec::with_capacity(prepared.len());
+        for (p, r) in prepared.iter().zip(&batch.robots) {
+            let idx = p.minibatches.get(k);
+            let rows = r.minibatch_rows(idx);
+            let pick = |src: &[f32]| idx.iter().map(|&j| src[j]).collect::<Vec<f32>>();
+            let (n, ad) = (idx.len(), r.action_dim);
+            obs[p.robot] = Some(self.tensor2(rows.observations, n, r.obs_dim));
+            let targets = MinibatchTargets {
+                actions: self.tensor2(rows.actions, n, ad),
+                old_log_probs: self.tensor1(rows.log_probs),
+                old_means: self.tensor2(rows.action_means, n, ad),
+                old_stds: self.tensor2(rows.action_stds, n, ad),
+                advantages: self.tensor1(pick(&p.advantages)),
+                returns: self.tensor1(pick(&p.returns)),
+                old_values: self.tensor1(pick(&p.values)),
+            };
+            let neighbours = (self.cfg.smoothness_coef > 0.0)
+                .then(|| NeighbourRows::new(r, idx, self.cfg.smoothness_order))
+                .filter(|n| !n.current.is_empty())
+                .map(|n| n.tensors(&self.device));
+            inputs.push((p.robot, n, targets, neighbours));
         }
+        let outs = self.model.net.actors(obs.clone());
+        // The same minibatch mirrored left-right, for the symmetry loss.
+        let mirrored_outs = (self.cfg.symmetry_coef > 0.0).then(|| {
+            let mirrored = obs
+                .iter()
+                .zip(&self.mirrors)
+                .map(|(o, m)| match (o, m) {
+                    (Some(o), Some(m)) => Some(m.observations(o.clone())),
+                    _ => None,
+                })
+                .collect();
+            self.model.net.actors(mirrored)
+        });
 
-        self.iteration += 1;
-        if acc.steps == 0 {
-            self.diverged_updates += 1;
-            tracing::warn!(
-                iteration = self.iteration,
-                skipped = acc.skipped,
-                "every minibatch step had a non-finite loss or gradient; the policy is unchanged"
-            );
-            if self.diverged_updates >= MAX_DIVERGED_UPDATES {
-                return Err(LearnerError::NonFinite(format!(
-                    "{MAX_DIVERGED_UPDATES} updates in a row had only non-finite losses or \
-                     gradients (last at iteration {}); the last good policy is in the last \
-                     checkpoint",
-                    self.iteration
-                )));
-            }
-        } else {
-            self.diverged_updates = 0;
+        let mut loss_sum: Option<Tensor<1>> = None;
+        let mut parts = LossParts::default();
+        for (robot, n, targets, neighbours) in inputs {
+            let missing = |what: &str| LearnerError::Batch(format!("missing {what}"));
+            let out = outs[robot]
+                .as_ref()
+                .ok_or_else(|| missing("actor output"))?;
+            let robot_obs = obs[robot].clone().ok_or_else(|| missing("observations"))?;
+            let mirrored = match (&mirrored_outs, &self.mirrors[robot]) {
+                (Some(o), Some(_)) => Some(
+                    o[robot]
+                        .as_ref()
+                        .ok_or_else(|| missing("mirrored output"))?,
+                ),
+                _ => None,
+            };
+            let (loss, robot_parts) =
+                self.minibatch_loss(robot, out, mirrored, robot_obs, targets, neighbours)?;
+            let w = n as f32 / total as f32;
+            parts.add_weighted(&robot_parts, w);
+            let weighted = loss.mul_scalar(w);
+            loss_sum = Some(match loss_sum {
+                None => weighted,
+                Some(t) => t.add(weighted),
+            });
         }
-        let steps = acc.steps.max(1) as f32;
-        let mut std_sum = 0f32;
-        let mut std_n = 0usize;
-        for &i in &index {
-            let s = tensor_to_vec(self.model.net.robots[i].std().detach())?;
-            std_sum += s.iter().sum::<f32>();
-            std_n += s.len();
+        let loss = loss_sum.ok_or_else(|| LearnerError::Batch("no loss".into()))?;
+        let grads = loss.backward();
+        let mut grads = GradientsParams::from_grads(grads, &self.model.net);
+        let norm = clip_global_grad_norm(&self.model.net, &mut grads, self.cfg.max_grad_norm)?;
+        if !(norm.is_finite() && parts.kl.is_finite()) {
+            return Ok(None);
         }
-        let samples = batch.samples();
-        let secs = start.elapsed().as_secs_f32();
-        let reward_sum: f32 = batch
-            .robots
+        self.lr = self.cfg.adapt_lr(self.lr, parts.kl);
+        let net = std::mem::replace(&mut self.model.net, placeholder_net());
+        self.model.net = self.optim.step(self.lr, net, grads);
+        Ok(Some((parts, norm)))
+    }
+
+    /// One robot's loss on one minibatch, as rsl_rl's `ppo.py` adds it up: the clipped surrogate,
+    /// the (clipped) value loss and the entropy bonus; for L3P `λ (L_rec_obs + L_rec_act)`; with
+    /// `symmetry_coef` > 0 the mirror loss; with `smoothness_coef` > 0 the temporal smoothness of the
+    /// minibatch's own means at consecutive steps of an episode. Also the KL to the behaviour
+    /// policy (no gradient) and the clipped fraction.
+    fn minibatch_loss(
+        &mut self,
+        robot: usize,
+        out: &ActorOut,
+        mirrored: Option<&ActorOut>,
+        obs: Tensor<2>,
+        t: MinibatchTargets,
+        neighbours: Option<NeighbourTensors>,
+    ) -> Result<(Tensor<1>, LossParts), LearnerError> {
+        let cfg = &self.cfg;
+        let heads = &self.model.net.robots[robot];
+        let mut parts = LossParts {
+            kl: scalar(approx_kl(
+                out.mean.clone().detach(),
+                out.std.clone().detach(),
+                t.old_means,
+                t.old_stds,
+            ))?,
+            ..LossParts::default()
+        };
+        let logp = gaussian_log_prob(t.actions, out.mean.clone(), out.std.clone());
+        let entropy = gaussian_entropy(out.std.clone());
+        let ratio = logp.sub(t.old_log_probs).exp();
+        let ratio_host = tensor_to_vec(ratio.clone().detach())?;
+        let clipped = ratio_host
             .iter()
-            .map(|r| r.rewards.iter().sum::<f32>())
-            .sum();
-        Ok(UpdateMetrics {
-            iteration: self.iteration,
-            samples,
-            approx_kl: acc.kl / steps,
-            clip_fraction: acc.clip_fraction / steps,
-            explained_variance: explained_variance(&ev_values, &ev_returns),
-            learning_rate: self.lr,
-            entropy: acc.entropy / steps,
-            mean_std: std_sum / std_n.max(1) as f32,
-            surrogate_loss: acc.surrogate / steps,
-            value_loss: acc.value / steps,
-            rec_obs_loss: acc.rec_obs / steps,
-            rec_act_loss: acc.rec_act / steps,
-            symmetry_loss: acc.symmetry / steps,
-            smoothness_loss: acc.smoothness / steps,
-            total_loss: acc.total / steps,
-            grad_norm: acc.grad_norm / steps,
-            skipped_steps: acc.skipped,
-            recon_mse,
-            recon_baseline_mse,
-            mean_reward: reward_sum / samples.max(1) as f32,
-            update_seconds: secs,
-            samples_per_second: samples as f32 / secs.max(1e-9),
-        })
+            .filter(|r| (**r - 1.0).abs() > cfg.clip_param)
+            .count();
+        parts.clip_fraction = clipped as f32 / ratio_host.len().max(1) as f32;
+        let surrogate = surrogate_loss(ratio, t.advantages, cfg.clip_param);
+        let value = heads.value(obs.clone()).squeeze_dim::<1>(1);
+        let value_loss = value_loss(
+            value,
+            t.old_values,
+            t.returns,
+            cfg.clip_param,
+            cfg.use_clipped_value_loss,
+        );
+        parts.surrogate = scalar(surrogate.clone().detach())?;
+        parts.value = scalar(value_loss.clone().detach())?;
+        parts.entropy = scalar(entropy.clone().detach())?;
+        let mut loss = surrogate
+            .add(value_loss.mul_scalar(cfg.value_loss_coef))
+            .sub(entropy.mul_scalar(cfg.entropy_coef));
+
+        let lambda = self.model.config.recovery.lambda;
+        if let (Some(r_obs), Some(h)) = (&heads.r_obs, &out.h) {
+            let l = r_obs.loss(obs, h.clone(), &mut self.rng);
+            parts.rec_obs = scalar(l.clone().detach())?;
+            loss = loss.add(l.mul_scalar(lambda));
+        }
+        if let (Some(r_act), Some(z)) = (&heads.r_act, &out.z) {
+            let z_hat = r_act.forward(out.mean.clone());
+            let l = z_hat.sub(z.clone().detach()).square().mean();
+            parts.rec_act = scalar(l.clone().detach())?;
+            loss = loss.add(l.mul_scalar(lambda));
+        }
+        if let (Some(out_m), Some(m)) = (mirrored, &self.mirrors[robot]) {
+            let l = out_m
+                .mean
+                .clone()
+                .sub(m.actions(out.mean.clone()))
+                .square()
+                .mean();
+            parts.symmetry = scalar(l.clone().detach())?;
+            loss = loss.add(l.mul_scalar(cfg.symmetry_coef));
+        }
+        if let Some(n) = neighbours {
+            // μ of each sample's neighbours in time, from this same forward pass.
+            let at = |rows: &Tensor<1, Int>| out.mean.clone().select(0, rows.clone());
+            let current = at(&n.current);
+            let mut diff = at(&n.next).sub(current.clone());
+            if let Some(prev) = &n.prev {
+                diff = diff.sub(current.sub(at(prev)));
+            }
+            let l = diff.square().mean();
+            parts.smoothness = scalar(l.clone().detach())?;
+            loss = loss.add(l.mul_scalar(cfg.smoothness_coef));
+        }
+        parts.total = scalar(loss.clone().detach())?;
+        Ok((loss, parts))
+    }
+
+    /// Counts updates in which every step was skipped; too many in a row is an error (the last
+    /// good policy stays in the last checkpoint).
+    fn check_progress(&mut self, acc: &UpdateAccumulator) -> Result<(), LearnerError> {
+        if acc.steps > 0 {
+            self.diverged_updates = 0;
+            return Ok(());
+        }
+        self.diverged_updates += 1;
+        tracing::warn!(
+            iteration = self.iteration,
+            skipped = acc.skipped,
+            "every minibatch step had a non-finite loss or gradient; the policy is unchanged"
+        );
+        if self.diverged_updates >= MAX_DIVERGED_UPDATES {
+            return Err(LearnerError::NonFinite(format!(
+                "{MAX_DIVERGED_UPDATES} updates in a row had only non-finite losses or \
+                 gradients (last at iteration {}); the last good policy is in the last \
+                 checkpoint",
+                self.iteration
+            )));
+        }
+        Ok(())
     }
 
     /// `R_obs` sampled reconstruction MSE on up to `eval_samples` observations per robot, and the
@@ -920,8 +961,9 @@ impl Ppo {
     }
 }
 
-#[derive(Default, Clone)]
-struct Acc {
+/// One minibatch's loss terms (for several robots: weighted by their share of the minibatch).
+#[derive(Debug, Default, Clone, PartialEq)]
+struct LossParts {
     kl: f32,
     clip_fraction: f32,
     surrogate: f32,
@@ -932,46 +974,58 @@ struct Acc {
     symmetry: f32,
     smoothness: f32,
     total: f32,
+}
+
+impl LossParts {
+    fn add_weighted(&mut self, o: &LossParts, w: f32) {
+        self.kl += w * o.kl;
+        self.clip_fraction += w * o.clip_fraction;
+        self.surrogate += w * o.surrogate;
+        self.value += w * o.value;
+        self.entropy += w * o.entropy;
+        self.rec_obs += w * o.rec_obs;
+        self.rec_act += w * o.rec_act;
+        self.symmetry += w * o.symmetry;
+        self.smoothness += w * o.smoothness;
+        self.total += w * o.total;
+    }
+}
+
+/// The metrics of an update's steps: sums of the steps taken, and the count of skipped ones.
+#[derive(Debug, Default)]
+struct UpdateAccumulator {
+    sums: LossParts,
     grad_norm: f32,
     steps: usize,
     /// Minibatch steps skipped for a non-finite loss or gradient.
     skipped: usize,
 }
 
-/// Host copies of one robot's minibatch.
-struct Gathered {
-    obs: Vec<f32>,
-    actions: Vec<f32>,
-    old_logp: Vec<f32>,
-    old_mu: Vec<f32>,
-    old_sigma: Vec<f32>,
-    adv: Vec<f32>,
-    ret: Vec<f32>,
-    old_v: Vec<f32>,
+impl UpdateAccumulator {
+    fn add(&mut self, parts: &LossParts, grad_norm: f32) {
+        self.sums.add_weighted(parts, 1.0);
+        self.grad_norm += grad_norm;
+        self.steps += 1;
+    }
+
+    /// Mean loss terms over the steps taken (zeros when none was).
+    fn mean(&self) -> LossParts {
+        let mut mean = LossParts::default();
+        mean.add_weighted(&self.sums, 1.0 / self.steps.max(1) as f32);
+        mean
+    }
 }
 
-impl Gathered {
-    fn new(r: &crate::storage::RobotRollout, p: &Prepared, idx: &[usize]) -> Self {
-        let (od, ad) = (p.obs_dim, p.act_dim);
-        let rows = |src: &[f32], w: usize| {
-            let mut v = Vec::with_capacity(idx.len() * w);
-            for &j in idx {
-                v.extend_from_slice(&src[j * w..(j + 1) * w]);
-            }
-            v
-        };
-        let pick = |src: &[f32]| idx.iter().map(|&j| src[j]).collect::<Vec<f32>>();
-        Self {
-            obs: rows(&r.observations, od),
-            actions: rows(&r.actions, ad),
-            old_logp: pick(&r.log_probs),
-            old_mu: rows(&r.action_means, ad),
-            old_sigma: rows(&r.action_stds, ad),
-            adv: pick(&p.adv),
-            ret: pick(&p.ret),
-            old_v: pick(&p.values),
-        }
-    }
+/// One robot's minibatch targets as tensors: the behaviour policy's actions and distribution, and
+/// the advantages, returns and values of [`Ppo::prepare`].
+struct MinibatchTargets {
+    actions: Tensor<2>,
+    old_log_probs: Tensor<1>,
+    old_means: Tensor<2>,
+    old_stds: Tensor<2>,
+    advantages: Tensor<1>,
+    returns: Tensor<1>,
+    old_values: Tensor<1>,
 }
 
 /// Rows of a minibatch that have their neighbours in time within it, for the smoothness loss:

@@ -2,8 +2,12 @@
 //! arrays (the layout of `l3p_proto::RolloutChunk`), [`RolloutBatch`] the rollouts of every robot for
 //! one update. Buffers are reused: [`RobotRollout::clear`] keeps capacity and
 //! [`RobotRollout::append_chunk`] concatenates several actors' chunks of one robot along the env axis.
+//! [`RobotRollout::minibatches`] splits a rollout into [`Minibatches`] and
+//! [`RobotRollout::minibatch_rows`] copies one minibatch's rows out ([`MinibatchRows`]).
 
 use l3p_proto::RolloutChunk;
+use rand::Rng;
+use rand::seq::SliceRandom;
 
 use crate::LearnerError;
 
@@ -224,6 +228,99 @@ impl RobotRollout {
     }
 }
 
+/// How [`RobotRollout::minibatches`] draws its minibatches.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MinibatchSplit {
+    /// Samples shuffled one by one (rsl_rl's feed-forward PPO).
+    Samples,
+    /// Whole env segments (every step of a shuffled set of envs, in time order; rsl_rl's recurrent
+    /// split), so that a sample's neighbours in time share its minibatch.
+    EnvSegments,
+}
+
+/// A rollout's samples (step-major indices `t · N + e`) in `count` equal minibatches. One split
+/// serves every epoch of an update, as in rsl_rl; samples beyond `count · size` are left out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Minibatches {
+    order: Vec<usize>,
+    size: usize,
+    count: usize,
+}
+
+impl Minibatches {
+    /// Number of minibatches.
+    pub fn count(&self) -> usize {
+        self.count
+    }
+
+    /// Samples per minibatch.
+    pub fn size(&self) -> usize {
+        self.size
+    }
+
+    /// The sample indices of minibatch `k` (< `count`).
+    pub fn get(&self, k: usize) -> &[usize] {
+        &self.order[k * self.size..(k + 1) * self.size]
+    }
+}
+
+/// Host copies of one minibatch's rows of a [`RobotRollout`], row-major like the rollout.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MinibatchRows {
+    pub observations: Vec<f32>,
+    pub actions: Vec<f32>,
+    pub log_probs: Vec<f32>,
+    pub action_means: Vec<f32>,
+    pub action_stds: Vec<f32>,
+}
+
+impl RobotRollout {
+    /// Splits the rollout into `count` minibatches (`count` ≤ samples, and ≤ envs for
+    /// [`MinibatchSplit::EnvSegments`]: checked by the caller).
+    pub fn minibatches(
+        &self,
+        count: usize,
+        split: MinibatchSplit,
+        rng: &mut impl Rng,
+    ) -> Minibatches {
+        let (order, size) = match split {
+            MinibatchSplit::EnvSegments => {
+                let mut envs: Vec<usize> = (0..self.envs).collect();
+                envs.shuffle(rng);
+                let order = envs
+                    .iter()
+                    .flat_map(|&e| (0..self.steps).map(move |t| t * self.envs + e))
+                    .collect();
+                (order, (self.envs / count) * self.steps)
+            }
+            MinibatchSplit::Samples => {
+                let mut order: Vec<usize> = (0..self.samples()).collect();
+                order.shuffle(rng);
+                (order, self.samples() / count)
+            }
+        };
+        Minibatches { order, size, count }
+    }
+
+    /// Copies the rows `idx` (sample indices) out of the rollout.
+    pub fn minibatch_rows(&self, idx: &[usize]) -> MinibatchRows {
+        let rows = |src: &[f32], width: usize| {
+            let mut v = Vec::with_capacity(idx.len() * width);
+            for &j in idx {
+                v.extend_from_slice(&src[j * width..(j + 1) * width]);
+            }
+            v
+        };
+        MinibatchRows {
+            observations: rows(&self.observations, self.obs_dim),
+            actions: rows(&self.actions, self.action_dim),
+            log_probs: rows(&self.log_probs, 1),
+            action_means: rows(&self.action_means, self.action_dim),
+            action_stds: rows(&self.action_stds, self.action_dim),
+        }
+    }
+}
+
 /// The data of one PPO update: one rollout per robot (robots absent from the batch are not updated
 /// except through the shared core).
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -248,5 +345,78 @@ impl RolloutBatch {
             }
         }
         Ok(batch)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::SeedableRng;
+    use rand::rngs::StdRng;
+
+    use super::*;
+
+    /// A rollout whose every value encodes its sample index `t · N + e`.
+    fn numbered(steps: usize, envs: usize) -> RobotRollout {
+        let mut r = RobotRollout::zeros("a1", steps, envs, 2, 1);
+        for j in 0..r.samples() {
+            r.observations[2 * j] = j as f32;
+            r.observations[2 * j + 1] = -(j as f32);
+            r.actions[j] = j as f32;
+            r.log_probs[j] = j as f32;
+        }
+        r
+    }
+
+    #[test]
+    fn env_segment_minibatches_hold_whole_envs_in_time_order() {
+        let r = numbered(5, 8);
+        let mb = r.minibatches(
+            4,
+            MinibatchSplit::EnvSegments,
+            &mut StdRng::seed_from_u64(1),
+        );
+        assert_eq!((mb.count(), mb.size()), (4, 10));
+        let mut seen = Vec::new();
+        for k in 0..mb.count() {
+            let idx = mb.get(k);
+            for segment in idx.chunks(5) {
+                let env = segment[0] % 8;
+                let expected: Vec<usize> = (0..5).map(|t| t * 8 + env).collect();
+                assert_eq!(segment, expected.as_slice());
+            }
+            seen.extend_from_slice(idx);
+        }
+        seen.sort_unstable();
+        assert_eq!(seen, (0..40).collect::<Vec<_>>());
+    }
+
+    #[test]
+    fn sample_minibatches_are_a_permutation_and_rows_follow_indices() {
+        let r = numbered(3, 4);
+        let mb = r.minibatches(3, MinibatchSplit::Samples, &mut StdRng::seed_from_u64(2));
+        let mut all: Vec<usize> = (0..3).flat_map(|k| mb.get(k).to_vec()).collect();
+        assert_ne!(all, (0..12).collect::<Vec<_>>(), "not shuffled");
+        all.sort_unstable();
+        assert_eq!(all, (0..12).collect::<Vec<_>>());
+        let idx = mb.get(1);
+        let rows = r.minibatch_rows(idx);
+        for (k, &j) in idx.iter().enumerate() {
+            assert_eq!(rows.observations[2 * k..2 * k + 2], [j as f32, -(j as f32)]);
+            assert_eq!(rows.actions[k], j as f32);
+            assert_eq!(rows.log_probs[k], j as f32);
+        }
+    }
+
+    #[test]
+    fn a_split_that_does_not_divide_leaves_the_remainder_out() {
+        let r = numbered(2, 5);
+        let mb = r.minibatches(
+            2,
+            MinibatchSplit::EnvSegments,
+            &mut StdRng::seed_from_u64(3),
+        );
+        assert_eq!(mb.size(), 4);
+        let mb = r.minibatches(3, MinibatchSplit::Samples, &mut StdRng::seed_from_u64(3));
+        assert_eq!(mb.size(), 3);
     }
 }
