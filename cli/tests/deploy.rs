@@ -1,8 +1,8 @@
 //! Deploy end to end over real processes on loopback Zenoh: `l3p registry serve`, `l3p sim-robot`
-//! and `l3p deploy`. A policy trained by `l3p train configs/a1-flat.toml` (session 7's trot: gait
-//! clock, action filter, smoothness loss, kp 60 / kd 1.2, the first to meet the whole walk
-//! criterion; exported under docs/a1-flat-session7/policy) walks the simulated A1 at a normal height; when the state stream stops the controller
-//! damps within 3 periods and stays damped until `l3p operate resume`; a NaN-producing policy is damped;
+//! and `l3p deploy`. A policy trained by `l3p train configs/a1-flat.toml --until-walks` (session 13:
+//! 20 ms physics, seed 2, meets the walk criterion in 5 ms physics at iteration 140; exported under
+//! docs/a1-flat-session13/policy) walks the simulated A1, stepping at 5 ms, at a normal height; when
+//! the state stream stops the controller damps within 3 periods and stays damped until `l3p operate resume`; a NaN-producing policy is damped;
 //! a policy for another robot is refused before any command is sent.
 
 mod common;
@@ -16,7 +16,7 @@ use l3p_net::{ZenohSettings, free_loopback_port, open_session};
 use l3p_proto::{ControlMode, DeployStatus, RobotCommand, codec, keys};
 
 fn trained_policy() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session7/policy/policy.safetensors")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session13/policy/policy.safetensors")
 }
 
 /// What the test saw on the robot's keys, in arrival order.
