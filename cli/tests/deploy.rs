@@ -16,7 +16,8 @@ use l3p_net::{ZenohSettings, free_loopback_port, open_session};
 use l3p_proto::{ControlMode, DeployStatus, RobotCommand, codec, keys};
 
 fn trained_policy() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session13/policy/policy.safetensors")
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../docs/a1-flat-session13/policy/policy.safetensors")
 }
 
 /// What the test saw on the robot's keys, in arrival order.

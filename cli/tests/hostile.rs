@@ -142,7 +142,8 @@ fn bad_operator(rng: &mut Rng, k: usize) -> Vec<u8> {
 }
 
 fn trained_policy() -> std::path::PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session13/policy/policy.safetensors")
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../docs/a1-flat-session13/policy/policy.safetensors")
 }
 
 fn l3p(args: &[&str]) -> std::process::Output {
