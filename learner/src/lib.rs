@@ -39,8 +39,8 @@ pub mod uploader;
 
 pub use gae::{compute_gae, explained_variance, normalize};
 pub use ppo::{
-    Mirror, Mode, Ppo, PpoConfig, Schedule, TransferHeads, UpdateMetrics, clip_global_grad_norm,
-    param_ids,
+    Mirror, Mode, Ppo, PpoConfig, Schedule, SmoothnessSpace, TransferHeads, UpdateMetrics,
+    clip_global_grad_norm, param_ids,
 };
 pub use storage::{RobotRollout, RolloutBatch};
 

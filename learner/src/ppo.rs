@@ -114,6 +114,19 @@ pub enum Schedule {
     Fixed,
 }
 
+/// What the smoothness loss measures its differences in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "snake_case")]
+pub enum SmoothnessSpace {
+    /// The policy's raw mean action: the same weight lets a robot with a larger action scale
+    /// jitter its joint targets more (ANYmal's 0.5 against A1's 0.25).
+    #[default]
+    Action,
+    /// Joint targets in rad (the mean action times the robot's `action_scale`): the quantity the
+    /// walk criterion bounds, so one weight means the same on every robot.
+    JointTarget,
+}
+
 /// PPO hyperparameters; defaults are rsl_rl's locomotion values (legged_gym / IsaacLab 2.1).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -154,6 +167,8 @@ pub struct PpoConfig {
     /// the fast but smooth motion of a quick gait included), 2 = `μ(o_{t+1}) − 2μ(o_t) + μ(o_{t−1})`
     /// (only changes of the change: step-to-step jitter, not a smooth gait at any speed).
     pub smoothness_order: u8,
+    /// Units of the smoothness loss's differences: the raw action, or joint targets in rad.
+    pub smoothness_space: SmoothnessSpace,
 }
 
 impl Default for PpoConfig {
@@ -181,6 +196,7 @@ impl Default for PpoConfig {
             symmetry_coef: 0.0,
             smoothness_coef: 0.0,
             smoothness_order: 1,
+            smoothness_space: SmoothnessSpace::Action,
         }
     }
 }
@@ -881,7 +897,11 @@ impl Ppo {
             if let Some(prev) = &n.prev {
                 diff = diff.sub(current.sub(at(prev)));
             }
-            let l = diff.square().mean();
+            let scale = match cfg.smoothness_space {
+                SmoothnessSpace::Action => 1.0,
+                SmoothnessSpace::JointTarget => self.model.robots[robot].action_scale,
+            };
+            let l = diff.mul_scalar(scale).square().mean();
             parts.smoothness = scalar(l.clone().detach())?;
             loss = loss.add(l.mul_scalar(cfg.smoothness_coef));
         }

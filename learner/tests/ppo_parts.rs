@@ -692,20 +692,32 @@ fn the_smoothness_loss_is_the_rollouts_own_mean_squared_difference() {
             *d = end_step == Some(j / r.envs);
         }
         r.truncated.iter_mut().for_each(|d| *d = false);
-        for order in [1u8, 2] {
-            let mut cfg = start.config().clone();
-            cfg.smoothness_coef = 1.0;
-            cfg.smoothness_order = order;
-            cfg.learning_rate = 1e-30;
-            cfg.schedule = Schedule::Fixed;
-            let mut ppo = Ppo::new(cfg, start.model().clone(), train_device()).unwrap();
-            let reported = ppo.update(&batch).unwrap().smoothness_loss;
-            let expected = mean_squared_difference(&batch.robots[0], order, end_step);
-            assert!(
-                (reported - expected).abs() <= 1e-3 * expected,
-                "order {order}, episodes ending at {end_step:?}: reported {reported}, by hand \
-                 {expected}"
-            );
+        // In joint-target space the differences are the action's times the robot's scale.
+        for (space, action_scale) in [
+            (SmoothnessSpace::Action, 1.0),
+            (SmoothnessSpace::JointTarget, 1.0),
+            (SmoothnessSpace::JointTarget, 0.5),
+        ] {
+            for order in [1u8, 2] {
+                let mut cfg = start.config().clone();
+                cfg.smoothness_coef = 1.0;
+                cfg.smoothness_order = order;
+                cfg.smoothness_space = space;
+                cfg.learning_rate = 1e-30;
+                cfg.schedule = Schedule::Fixed;
+                let mut model = start.model().clone();
+                model.robots[0].action_scale = action_scale;
+                let mut ppo = Ppo::new(cfg, model, train_device()).unwrap();
+                let reported = ppo.update(&batch).unwrap().smoothness_loss;
+                let expected = mean_squared_difference(&batch.robots[0], order, end_step)
+                    * action_scale
+                    * action_scale;
+                assert!(
+                    (reported - expected).abs() <= 1e-3 * expected,
+                    "{space:?} at action scale {action_scale}, order {order}, episodes ending \
+                     at {end_step:?}: reported {reported}, by hand {expected}"
+                );
+            }
         }
     }
 }
