@@ -4,15 +4,15 @@
 # an iteration cap changed, trained with `--until-walks` (walk checks in 5 ms physics at joint
 # damping 2). Each run gets a fresh data directory: the same data dir and run name would resume.
 #
-#   experiments/catalog-walk.sh <out-dir> [seed] [cap] robot...
+#   experiments/catalog-walk.sh <out-dir> <seed> <cap> robot...
 #   experiments/catalog-walk.sh /work/data/catalog 1 300 spot anymal_d
 #   (L3P=<binary> picks the l3p binary; BASE=<config> a variant of configs/a1-flat.toml)
 #
 # Per robot it leaves <out-dir>/<robot>-s<seed>/{config.toml,train.log,data/} and prints the run's
 # walk.json (when the criterion held) or its last walk check.
 set -euo pipefail
-out=${1:?out dir}; seed=${2:-1}; cap=${3:-300}; shift 3 || true
-[ $# -gt 0 ] || { echo "name at least one robot" >&2; exit 2; }
+[ $# -ge 4 ] || { echo "usage: $0 <out-dir> <seed> <cap> robot..." >&2; exit 2; }
+out=$1; seed=$2; cap=$3; shift 3
 l3p=${L3P:-l3p}
 here=$(cd "$(dirname "$0")/.." && pwd)
 base=${BASE:-$here/configs/a1-flat.toml}   # BASE=<config> to try a variant of the recipe
