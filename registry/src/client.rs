@@ -2,7 +2,7 @@
 //! a registry service over Zenoh. Its methods mirror [`crate::Registry`]; blobs are hash-checked on
 //! arrival and service-side errors come back as [`RegistryError::Remote`] with their [`ErrorCode`].
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use l3p_proto::codec;
 use l3p_proto::keys;
@@ -19,6 +19,9 @@ use crate::error::RegistryError;
 use crate::store::{
     CoreCheck, ListFilter, PutOutcome, PutRequest, TagOutcome, check_core, sha256_hex,
 };
+
+/// Longest pause between two tries of a query no registry has answered yet.
+const MAX_RETRY_PAUSE: Duration = Duration::from_millis(500);
 
 /// Client of the registry service. Cheap to clone (the Zenoh session is shared).
 #[derive(Clone)]
@@ -188,6 +191,11 @@ impl RegistryClient {
     }
 
     /// One query, first reply: payload and attachment, or the service's error.
+    ///
+    /// A query that no registry has matched yet (a session that has just opened, before Zenoh has
+    /// propagated the service's queryable) ends at once with no reply; it is sent again, with a
+    /// growing pause, until `timeout` has passed. Retrying is safe for every operation: reads have
+    /// no effect and a put of identical bytes returns the version it already made.
     async fn query(
         &self,
         op: &str,
@@ -200,15 +208,29 @@ impl RegistryClient {
             key: key.clone(),
             message: e.to_string(),
         };
-        let get = self.session.get(&key).payload(payload).timeout(timeout);
-        let replies = match attachment {
-            Some(attachment) => get.attachment(attachment).await,
-            None => get.await,
-        }
-        .map_err(zenoh_err)?;
-        let reply = match replies.recv_async().await {
-            Ok(reply) => reply,
-            Err(_) => return Err(RegistryError::NoReply { key, timeout }),
+        let deadline = Instant::now() + timeout;
+        let mut pause = Duration::from_millis(20);
+        let reply = loop {
+            let remaining = deadline.saturating_duration_since(Instant::now());
+            if remaining.is_zero() {
+                return Err(RegistryError::NoReply { key, timeout });
+            }
+            let get = self
+                .session
+                .get(&key)
+                .payload(payload.clone())
+                .timeout(remaining);
+            let replies = match &attachment {
+                Some(attachment) => get.attachment(attachment.clone()).await,
+                None => get.await,
+            }
+            .map_err(zenoh_err)?;
+            if let Ok(reply) = replies.recv_async().await {
+                break reply;
+            }
+            let remaining = deadline.saturating_duration_since(Instant::now());
+            tokio::time::sleep(pause.min(remaining)).await;
+            pause = (pause * 2).min(MAX_RETRY_PAUSE);
         };
         match reply.into_result() {
             Ok(sample) => Ok((

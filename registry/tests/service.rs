@@ -350,3 +350,35 @@ async fn no_service_is_a_clear_error() {
     assert!(matches!(err, RegistryError::NoReply { .. }), "{err}");
     assert!(err.to_string().contains("l3p registry serve"), "{err}");
 }
+
+/// A client that asks before the service's queryable is up (a process that has just started beside
+/// its registry) waits for it within its timeout instead of failing at once.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_query_sent_before_the_service_starts_is_answered_once_it_does() {
+    let dir = tempfile::tempdir().unwrap();
+    let port = free_loopback_port().unwrap();
+    let server_session = open_session(&ZenohSettings::loopback(Some(port), &[]))
+        .await
+        .unwrap();
+    let session = open_session(&ZenohSettings::loopback(None, &[port]))
+        .await
+        .unwrap();
+    let client = RegistryClient::new(&session)
+        .with_timeouts(Duration::from_secs(20), Duration::from_secs(20));
+    let cancel = CancellationToken::new();
+    let server = tokio::spawn({
+        let cancel = cancel.clone();
+        let registry = Arc::new(Registry::open(dir.path()).unwrap());
+        async move {
+            tokio::time::sleep(Duration::from_millis(500)).await;
+            serve_with(&server_session, registry, ServiceLimits::default(), cancel).await
+        }
+    });
+    let started = Instant::now();
+    let listed = client.list(&ListFilter::default()).await;
+    assert!(listed.is_ok(), "{listed:?}");
+    assert!(listed.unwrap().is_empty());
+    assert!(started.elapsed() >= Duration::from_millis(500));
+    cancel.cancel();
+    server.await.unwrap().unwrap();
+}
