@@ -7,7 +7,7 @@ use std::path::Path;
 
 use l3p_policy::{DeployPolicy, RobotIo};
 use l3p_proto::registry::{ArtifactKind, ArtifactMeta};
-use l3p_registry::RegistryClient;
+use l3p_registry_client::RegistryClient;
 use l3p_robots::catalog::RobotSpec;
 use l3p_robots::config::EnvConfig;
 
@@ -35,7 +35,7 @@ pub fn load_policy(
     expected_sha256: Option<&str>,
     robot: &RobotSpec,
 ) -> Result<LoadedPolicy, DeployError> {
-    let sha256 = l3p_registry::sha256_hex(bytes);
+    let sha256 = l3p_registry_client::sha256_hex(bytes);
     if let Some(expected) = expected_sha256
         && expected != sha256
     {

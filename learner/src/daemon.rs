@@ -144,7 +144,7 @@ pub enum DaemonError {
     #[error("zenoh: {0}")]
     Zenoh(String),
     #[error("registry: {0}")]
-    Registry(#[from] l3p_registry::RegistryError),
+    Registry(#[from] l3p_registry_client::RegistryError),
     #[error("cannot write {path}: {source}")]
     Io {
         path: PathBuf,
@@ -240,7 +240,7 @@ fn publish_weights(
     let mut entries = Vec::new();
     for spec in robots {
         let (bytes, config) = ppo.export(&spec.name)?;
-        let sha256 = l3p_registry::sha256_hex(&bytes);
+        let sha256 = l3p_registry_client::sha256_hex(&bytes);
         entries.push(RobotWeights {
             robot: spec.name.clone(),
             sha256: sha256.clone(),
@@ -275,7 +275,7 @@ fn save_checkpoint(
     registry: Option<&RegistryUploader>,
     record: &MetricsRecord,
 ) -> Result<(), DaemonError> {
-    use l3p_registry::{ArtifactKind, LineageRole, PutRequest};
+    use l3p_registry_client::{ArtifactKind, LineageRole, PutRequest};
     let bytes = ppo.checkpoint_bytes()?;
     let path = checkpoint_path(&opts.run_dir);
     l3p_policy::write_atomic(&path, &bytes).map_err(|source| DaemonError::Io { path, source })?;
@@ -411,7 +411,7 @@ pub async fn run(
 
     let registry = opts
         .use_registry
-        .then(|| l3p_registry::RegistryClient::new(&session));
+        .then(|| l3p_registry_client::RegistryClient::new(&session));
     let from_registry = match &registry {
         Some(client) if !checkpoint_path(&opts.run_dir).exists() => client
             .try_get_blob(&format!("{}@latest", checkpoint_artifact(&run)))

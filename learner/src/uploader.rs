@@ -9,7 +9,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-use l3p_registry::{LineageRole, PutRequest, RegistryClient};
+use l3p_registry_client::{LineageRole, PutRequest, RegistryClient};
 use tokio::sync::mpsc;
 use tokio::task::JoinHandle;
 use tracing::{info, warn};
@@ -142,7 +142,7 @@ async fn store(
     client: &RegistryClient,
     upload: &mut Upload,
     checkpoint_ref: &mut Option<String>,
-) -> Result<(), l3p_registry::RegistryError> {
+) -> Result<(), l3p_registry_client::RegistryError> {
     let reference = match checkpoint_ref {
         Some(r) => r.clone(),
         None => {

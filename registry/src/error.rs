@@ -1,15 +1,16 @@
-//! [`RegistryError`]: everything the store, the service and the client can refuse, each mapped to a
-//! wire [`ErrorCode`] so that a remote error keeps its class.
+//! [`StoreError`]: what the SQLite store and the service in front of it can fail with — the
+//! database's own failures, or a [`RegistryError`] (any refusal a client can also see). The service
+//! sends each as its wire [`ErrorCode`].
 
 use std::path::PathBuf;
-use std::time::Duration;
 
 use l3p_proto::codec::CodecError;
 use l3p_proto::registry::{ErrorCode, RefError};
+use l3p_registry_client::RegistryError;
 
-/// A registry operation failed.
+/// A store operation failed.
 #[derive(Debug, thiserror::Error)]
-pub enum RegistryError {
+pub enum StoreError {
     #[error("cannot open registry database {path}: {source}")]
     Open {
         path: PathBuf,
@@ -36,107 +37,46 @@ pub enum RegistryError {
         #[source]
         source: rusqlite::Error,
     },
-    #[error("{0}")]
-    BadRef(#[from] RefError),
-    #[error("artifact {name:?} not found\nhint: `l3p registry list` shows what is stored")]
-    UnknownName { name: String },
-    #[error("{name} has no version {version} (latest is {latest})")]
-    UnknownVersion {
-        name: String,
-        version: u64,
-        latest: u64,
-    },
-    #[error("{name} has no alias {alias:?} (aliases: {known})")]
-    UnknownAlias {
-        name: String,
-        alias: String,
-        known: String,
-    },
     #[error(
         "registry database holds an unreadable {what}: {message}\nhint: restore registry.db from a backup"
     )]
     Corrupt { what: String, message: String },
-    #[error("bad request: {0}")]
-    BadRequest(String),
-    #[error("invalid artifact: {0}")]
-    Invalid(String),
-    #[error("{name} holds {existing} artifacts, cannot store a {requested} under the same name")]
-    KindMismatch {
-        name: String,
-        existing: String,
-        requested: String,
-    },
-    #[error("{what} of {len} bytes exceeds the limit of {limit} bytes")]
-    TooLarge { what: String, len: u64, limit: u64 },
-    #[error(
-        "integrity check failed for {what}: expected sha256 {expected}, got {actual}\nhint: the bytes were corrupted in transit or on disk; retry, or restore registry.db from a backup"
-    )]
-    Integrity {
-        what: String,
-        expected: String,
-        actual: String,
-    },
-    #[error(
-        "adapter {adapter} was trained against {expected_core} but is being loaded with {given_core}\nhint: load it with {expected_core}, or override with --allow-core-mismatch"
-    )]
-    CoreMismatch {
-        adapter: String,
-        expected_core: String,
-        given_core: String,
-    },
-    #[error(
-        "{adapter} records no core in its lineage, so it cannot be checked against {given_core}\nhint: override with --allow-core-mismatch"
-    )]
-    NoCoreLineage { adapter: String, given_core: String },
-    #[error("{0}")]
-    Codec(#[from] CodecError),
-    #[error("zenoh error on {key}: {message}")]
-    Zenoh { key: String, message: String },
-    #[error(
-        "no registry answered on {key} within {timeout:?}\nhint: start `l3p registry serve` and check the --connect endpoint"
-    )]
-    NoReply { key: String, timeout: Duration },
-    #[error("registry service replied with an error ({code}): {message}")]
-    Remote { code: ErrorCode, message: String },
-    #[error("malformed reply on {key}: {message}")]
-    BadReply { key: String, message: String },
+    #[error(transparent)]
+    Registry(#[from] RegistryError),
 }
 
-impl RegistryError {
-    /// The wire class of this error (what the service sends in its [`l3p_proto::registry::ErrorReply`]).
+impl StoreError {
+    /// The wire class of this error: the database's own failures are internal.
     pub fn code(&self) -> ErrorCode {
         match self {
-            Self::UnknownName { .. } | Self::UnknownVersion { .. } | Self::UnknownAlias { .. } => {
-                ErrorCode::NotFound
-            }
-            Self::BadRef(_) | Self::Invalid(_) | Self::BadRequest(_) => ErrorCode::BadRequest,
-            Self::KindMismatch { .. } | Self::CoreMismatch { .. } | Self::NoCoreLineage { .. } => {
-                ErrorCode::Conflict
-            }
-            Self::TooLarge { .. } => ErrorCode::TooLarge,
-            Self::Integrity { .. } => ErrorCode::Integrity,
-            Self::Codec(CodecError::TooLarge { .. }) => ErrorCode::TooLarge,
-            Self::Codec(CodecError::WrongVersion { .. }) => ErrorCode::WrongVersion,
-            Self::Codec(_) => ErrorCode::BadRequest,
-            Self::Remote { code, .. } => *code,
+            Self::Registry(e) => e.code(),
             Self::Open { .. }
             | Self::Dir { .. }
             | Self::SchemaTooNew { .. }
-            | Self::Corrupt { .. }
             | Self::Sqlite { .. }
-            | Self::Zenoh { .. }
-            | Self::NoReply { .. }
-            | Self::BadReply { .. } => ErrorCode::Internal,
+            | Self::Corrupt { .. } => ErrorCode::Internal,
         }
     }
 
-    /// `true` when the artifact, version or alias does not exist (locally or on the service): the
-    /// learner uses it to tell "no checkpoint yet" from a real failure.
+    /// `true` when the artifact, version or alias does not exist (see
+    /// [`RegistryError::is_not_found`]).
     pub fn is_not_found(&self) -> bool {
         self.code() == ErrorCode::NotFound
     }
 }
 
-pub(crate) fn sql(context: &'static str) -> impl FnOnce(rusqlite::Error) -> RegistryError {
-    move |source| RegistryError::Sqlite { context, source }
+impl From<RefError> for StoreError {
+    fn from(e: RefError) -> Self {
+        Self::Registry(e.into())
+    }
+}
+
+impl From<CodecError> for StoreError {
+    fn from(e: CodecError) -> Self {
+        Self::Registry(e.into())
+    }
+}
+
+pub(crate) fn sql(context: &'static str) -> impl FnOnce(rusqlite::Error) -> StoreError {
+    move |source| StoreError::Sqlite { context, source }
 }

@@ -18,14 +18,15 @@ use l3p_proto::registry::{
     MetaReply, OPS, PutHeader, PutReply, RefRequest, TagReply, TagRequest,
 };
 use l3p_proto::{WIRE_VERSION, WireMessage};
+use l3p_registry_client::{ListFilter, PutRequest, RegistryError, sha256_hex};
 use serde::Serialize;
 use tokio::sync::Semaphore;
 use tokio_util::sync::CancellationToken;
 use zenoh::bytes::Encoding;
 use zenoh::query::Query;
 
-use crate::error::RegistryError;
-use crate::store::{ListFilter, PutRequest, Registry};
+use crate::error::StoreError;
+use crate::store::Registry;
 
 /// Bounds on what the service accepts.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -123,13 +124,13 @@ async fn answer(query: Query, registry: Arc<Registry>, limits: ServiceLimits) {
                 .await
             {
                 Ok(outcome) => outcome,
-                Err(e) => Err(RegistryError::BadReply {
+                Err(e) => Err(StoreError::from(RegistryError::BadReply {
                     key: key.to_string(),
                     message: format!("handler failed: {e}"),
-                }),
+                })),
             }
         }
-        Err(e) => Err(e),
+        Err(e) => Err(e.into()),
     };
     let sent = match outcome {
         Ok(Answer::Json(bytes)) => {
@@ -201,7 +202,7 @@ fn read_request(
     Ok((payload, attachment))
 }
 
-fn json<T: Serialize + WireMessage>(message: &T) -> Result<Answer, RegistryError> {
+fn json<T: Serialize + WireMessage>(message: &T) -> Result<Answer, StoreError> {
     Ok(Answer::Json(codec::encode_json(message)?))
 }
 
@@ -224,7 +225,7 @@ fn handle(
     op: &str,
     payload: Vec<u8>,
     attachment: Option<Vec<u8>>,
-) -> Result<Answer, RegistryError> {
+) -> Result<Answer, StoreError> {
     let v = WIRE_VERSION;
     let ref_example = format!(r#"{{"wire_version":{v},"artifact":"a1-core@latest"}}"#);
     match op {
@@ -296,7 +297,8 @@ fn handle(
                 return Err(RegistryError::BadRequest(
                     "`put` needs a JSON PutHeader in the query attachment and the blob as payload"
                         .into(),
-                ));
+                )
+                .into());
             };
             let header: PutHeader = codec::decode_json(&header)?;
             if header.size != payload.len() as u64 {
@@ -308,8 +310,9 @@ fn handle(
                         header.size
                     ),
                     expected: header.sha256,
-                    actual: crate::store::sha256_hex(&payload),
-                });
+                    actual: sha256_hex(&payload),
+                }
+                .into());
             }
             let outcome = registry.put(PutRequest {
                 spec: header.spec,
@@ -326,7 +329,8 @@ fn handle(
             "unknown registry operation {other:?}\nhint: query {} with one of: {}",
             keys::registry("<op>"),
             OPS.join(", ")
-        ))),
+        ))
+        .into()),
     }
 }
 
@@ -354,7 +358,7 @@ mod fuzz {
         let blob = b"weights".to_vec();
         let header = format!(
             r#"{{"wire_version":{v},"spec":{{"name":"a1-core","kind":"core","robot":"a1","dims":{{"d_h":64}},"metrics":{{"reward":1.5}},"producer":"fuzz","lineage":[],"aliases":["best"]}},"sha256":"{}","size":{}}}"#,
-            crate::store::sha256_hex(&blob),
+            sha256_hex(&blob),
             blob.len()
         );
         let json = |op: &str, text: String| (op.to_string(), text.into_bytes(), None);

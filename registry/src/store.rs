@@ -13,8 +13,9 @@
 //! triggers make versions, blobs, lineage and alias history append-only. `PRAGMA synchronous=FULL`:
 //! a committed put survives power loss, not only a process crash.
 //!
-//! Main types: [`Registry`], [`PutRequest`], [`PutOutcome`], [`ListFilter`], [`TagOutcome`],
-//! [`CoreCheck`], [`IntegrityReport`].
+//! Main types: [`Registry`], [`IntegrityReport`]; what it takes and returns ([`PutRequest`],
+//! [`PutOutcome`], [`ListFilter`], [`TagOutcome`], [`CoreCheck`]) is shared with the client, in
+//! `l3p-registry-client`.
 
 use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::path::{Path, PathBuf};
@@ -23,13 +24,16 @@ use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
 use l3p_proto::registry::{
     AliasEvent, ArtifactKind, ArtifactMeta, ArtifactRef, ArtifactSpec, LATEST, LineageEdge,
-    LineageGraph, LineageInput, LineageLink, LineageRole, VersionSelector, validate_alias,
-    validate_name,
+    LineageGraph, LineageLink, LineageRole, VersionSelector, validate_alias, validate_name,
+};
+use l3p_registry_client::{
+    CoreCheck, ListFilter, PutOutcome, PutRequest, RegistryError, TagOutcome, check_core,
+    sha256_hex,
 };
 use rusqlite::{Connection, OpenFlags, OptionalExtension, TransactionBehavior, params};
 use serde::{Deserialize, Serialize};
 
-use crate::error::{RegistryError, sql};
+use crate::error::{StoreError, sql};
 
 /// File name of the database inside the data directory.
 pub const DB_FILE: &str = "registry.db";
@@ -111,102 +115,6 @@ CREATE TRIGGER IF NOT EXISTS alias_history_permanent BEFORE DELETE ON alias_hist
     BEGIN SELECT RAISE(ABORT, 'alias history is append-only'); END;
 "#;
 
-/// A new version to store: its spec and its bytes.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PutRequest {
-    pub spec: ArtifactSpec,
-    pub bytes: Vec<u8>,
-    /// The writer's sha256 of `bytes` (hex); when given, a mismatch refuses the put.
-    pub expected_sha256: Option<String>,
-}
-
-impl PutRequest {
-    pub fn new(name: &str, kind: ArtifactKind, bytes: Vec<u8>) -> Self {
-        Self {
-            spec: ArtifactSpec::new(name, kind),
-            bytes,
-            expected_sha256: None,
-        }
-    }
-
-    pub fn robot(mut self, robot: &str) -> Self {
-        self.spec.robot = Some(robot.to_string());
-        self
-    }
-
-    pub fn dim(mut self, key: &str, value: u64) -> Self {
-        self.spec.dims.insert(key.to_string(), value);
-        self
-    }
-
-    pub fn config(mut self, config: serde_json::Value) -> Self {
-        self.spec.config = config;
-        self
-    }
-
-    pub fn metric(mut self, key: &str, value: f64) -> Self {
-        self.spec.metrics.insert(key.to_string(), value);
-        self
-    }
-
-    pub fn producer(mut self, producer: &str) -> Self {
-        self.spec.producer = producer.to_string();
-        self
-    }
-
-    pub fn extra(mut self, extra: serde_json::Value) -> Self {
-        self.spec.extra = extra;
-        self
-    }
-
-    /// Record a dependency (`artifact` is `name@version|alias`, resolved at put time).
-    pub fn lineage(mut self, role: LineageRole, artifact: &str) -> Self {
-        self.spec.lineage.push(LineageInput {
-            role,
-            artifact: artifact.to_string(),
-        });
-        self
-    }
-
-    /// Point a user alias at the new version.
-    pub fn alias(mut self, alias: &str) -> Self {
-        self.spec.aliases.push(alias.to_string());
-        self
-    }
-}
-
-/// Result of a put: the stored version; `created` is `false` when the same name already held the same
-/// bytes and that version was returned (aliases in the request are still applied).
-#[derive(Debug, Clone, PartialEq)]
-pub struct PutOutcome {
-    pub meta: ArtifactMeta,
-    pub created: bool,
-}
-
-/// Result of a tag: the alias move; `moved` is `false` when it already pointed there.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct TagOutcome {
-    pub event: AliasEvent,
-    pub moved: bool,
-}
-
-/// Which versions [`Registry::list`] returns (every given field must match).
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
-pub struct ListFilter {
-    pub kind: Option<ArtifactKind>,
-    pub name: Option<String>,
-    pub robot: Option<String>,
-}
-
-/// Result of [`check_core`]: both versions and whether the adapter's lineage names this core.
-#[derive(Debug, Clone, PartialEq)]
-pub struct CoreCheck {
-    pub adapter: ArtifactMeta,
-    pub core: ArtifactMeta,
-    /// `false` only when the mismatch was allowed explicitly.
-    pub matches: bool,
-}
-
 /// Result of [`Registry::check_integrity`].
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct IntegrityReport {
@@ -251,9 +159,6 @@ impl std::fmt::Debug for Registry {
     }
 }
 
-/// Hex sha256 of `bytes` (one helper for the whole project, in `proto`).
-pub use l3p_proto::sha256_hex;
-
 fn now_ms() -> u64 {
     SystemTime::now()
         .duration_since(UNIX_EPOCH)
@@ -263,13 +168,13 @@ fn now_ms() -> u64 {
 
 impl Registry {
     /// Open (creating if needed) the registry in `dir` (`dir/registry.db`).
-    pub fn open(dir: &Path) -> Result<Self, RegistryError> {
-        std::fs::create_dir_all(dir).map_err(|source| RegistryError::Dir {
+    pub fn open(dir: &Path) -> Result<Self, StoreError> {
+        std::fs::create_dir_all(dir).map_err(|source| StoreError::Dir {
             path: dir.to_path_buf(),
             source,
         })?;
         let path = dir.join(DB_FILE);
-        let open_err = |source| RegistryError::Open {
+        let open_err = |source| StoreError::Open {
             path: path.clone(),
             source,
         };
@@ -295,7 +200,7 @@ impl Registry {
             .query_row("PRAGMA user_version", [], |row| row.get(0))
             .map_err(open_err)?;
         if found > SCHEMA_VERSION {
-            return Err(RegistryError::SchemaTooNew {
+            return Err(StoreError::SchemaTooNew {
                 path,
                 found,
                 supported: SCHEMA_VERSION,
@@ -336,7 +241,7 @@ impl Registry {
     }
 
     /// Store a new immutable version of `req.spec.name` (see [`PutOutcome`] for deduplication).
-    pub fn put(&self, req: PutRequest) -> Result<PutOutcome, RegistryError> {
+    pub fn put(&self, req: PutRequest) -> Result<PutOutcome, StoreError> {
         let PutRequest {
             spec,
             bytes,
@@ -349,7 +254,8 @@ impl Registry {
                 what: format!("blob for {}", spec.name),
                 len: size,
                 limit: MAX_BLOB_BYTES,
-            });
+            }
+            .into());
         }
         let sha256 = sha256_hex(&bytes);
         if let Some(expected) = expected_sha256
@@ -359,7 +265,8 @@ impl Registry {
                 what: format!("blob received for {}", spec.name),
                 expected,
                 actual: sha256,
-            });
+            }
+            .into());
         }
         let stored = StoredMeta {
             dims: spec.dims.clone(),
@@ -392,7 +299,8 @@ impl Registry {
                     name: name.to_string(),
                     existing: kind,
                     requested: spec.kind.to_string(),
-                });
+                }
+                .into());
             }
             Some(_) => {}
             None => {
@@ -448,7 +356,7 @@ impl Registry {
                 return Err(RegistryError::Invalid(format!(
                     "lineage role {role} must name a {wanted} artifact, but {}@{version} is a {kind}",
                     reference.name
-                )));
+                )).into());
             }
             edges.push(LineageEdge {
                 role: *role,
@@ -502,7 +410,7 @@ impl Registry {
     }
 
     /// Metadata of the version `reference` (`name@version|alias`) resolves to.
-    pub fn get_meta(&self, reference: &str) -> Result<ArtifactMeta, RegistryError> {
+    pub fn get_meta(&self, reference: &str) -> Result<ArtifactMeta, StoreError> {
         let reference = ArtifactRef::parse(reference)?;
         let conn = self.lock();
         let version = resolve(&conn, &reference)?;
@@ -510,7 +418,7 @@ impl Registry {
     }
 
     /// Metadata and bytes; the bytes are hashed and compared with the stored sha256.
-    pub fn get_blob(&self, reference: &str) -> Result<(ArtifactMeta, Vec<u8>), RegistryError> {
+    pub fn get_blob(&self, reference: &str) -> Result<(ArtifactMeta, Vec<u8>), StoreError> {
         let parsed = ArtifactRef::parse(reference)?;
         let mut conn = self.lock();
         let tx = conn
@@ -533,13 +441,14 @@ impl Registry {
                 what: format!("stored blob of {}", meta.reference()),
                 expected: meta.sha256,
                 actual,
-            });
+            }
+            .into());
         }
         Ok((meta, bytes))
     }
 
     /// Every version matching `filter`, ordered by name then version.
-    pub fn list(&self, filter: &ListFilter) -> Result<Vec<ArtifactMeta>, RegistryError> {
+    pub fn list(&self, filter: &ListFilter) -> Result<Vec<ArtifactMeta>, StoreError> {
         let conn = self.lock();
         let mut stmt = conn
             .prepare(
@@ -563,13 +472,13 @@ impl Registry {
 
     /// Point `alias` of the artifact's name at the version `reference` resolves to. `latest` is
     /// reserved: the registry moves it on every put.
-    pub fn tag(&self, reference: &str, alias: &str) -> Result<TagOutcome, RegistryError> {
+    pub fn tag(&self, reference: &str, alias: &str) -> Result<TagOutcome, StoreError> {
         let parsed = ArtifactRef::parse(reference)?;
         validate_alias(alias)?;
         if alias == LATEST {
             return Err(RegistryError::Invalid(format!(
                 "alias {LATEST:?} is moved by the registry on every put and cannot be set by hand\nhint: use another alias, e.g. prod"
-            )));
+            )).into());
         }
         let mut conn = self.lock();
         let tx = conn
@@ -589,7 +498,7 @@ impl Registry {
         &self,
         name: &str,
         alias: Option<&str>,
-    ) -> Result<Vec<AliasEvent>, RegistryError> {
+    ) -> Result<Vec<AliasEvent>, StoreError> {
         validate_name(name)?;
         let conn = self.lock();
         ensure_name(&conn, name)?;
@@ -616,7 +525,7 @@ impl Registry {
     }
 
     /// The version `reference` resolves to, with its transitive dependencies and dependents.
-    pub fn lineage(&self, reference: &str) -> Result<LineageGraph, RegistryError> {
+    pub fn lineage(&self, reference: &str) -> Result<LineageGraph, StoreError> {
         let parsed = ArtifactRef::parse(reference)?;
         let conn = self.lock();
         let version = resolve(&conn, &parsed)?;
@@ -637,14 +546,14 @@ impl Registry {
         adapter_ref: &str,
         core_ref: &str,
         allow_mismatch: bool,
-    ) -> Result<CoreCheck, RegistryError> {
+    ) -> Result<CoreCheck, StoreError> {
         let adapter = self.get_meta(adapter_ref)?;
         let core = self.get_meta(core_ref)?;
-        check_core(adapter, core, allow_mismatch)
+        Ok(check_core(adapter, core, allow_mismatch)?)
     }
 
     /// `PRAGMA integrity_check` plus a re-hash of every blob.
-    pub fn check_integrity(&self) -> Result<IntegrityReport, RegistryError> {
+    pub fn check_integrity(&self) -> Result<IntegrityReport, StoreError> {
         let conn = self.lock();
         let mut stmt = conn
             .prepare("PRAGMA integrity_check")
@@ -672,55 +581,6 @@ impl Registry {
             blobs_checked,
             bad_blobs,
         })
-    }
-}
-
-/// The rule for loading an adapter with a core: the adapter's lineage must hold a `trained_against`
-/// or `frozen_core` edge to exactly this core version. A mismatch is an error naming both versions,
-/// unless `allow_mismatch` (then it is logged and reported in [`CoreCheck::matches`]).
-pub fn check_core(
-    adapter: ArtifactMeta,
-    core: ArtifactMeta,
-    allow_mismatch: bool,
-) -> Result<CoreCheck, RegistryError> {
-    if core.kind != ArtifactKind::Core {
-        return Err(RegistryError::Invalid(format!(
-            "{} is a {}, not a core",
-            core.reference(),
-            core.kind
-        )));
-    }
-    let error = match adapter.core_edge() {
-        Some(edge)
-            if edge.name == core.name
-                && edge.version == core.version
-                && edge.sha256 == core.sha256 =>
-        {
-            return Ok(CoreCheck {
-                adapter,
-                core,
-                matches: true,
-            });
-        }
-        Some(edge) => RegistryError::CoreMismatch {
-            adapter: adapter.reference(),
-            expected_core: edge.reference(),
-            given_core: core.reference(),
-        },
-        None => RegistryError::NoCoreLineage {
-            adapter: adapter.reference(),
-            given_core: core.reference(),
-        },
-    };
-    if allow_mismatch {
-        tracing::warn!("{error} (allowed by override)");
-        Ok(CoreCheck {
-            adapter,
-            core,
-            matches: false,
-        })
-    } else {
-        Err(error)
     }
 }
 
@@ -764,7 +624,7 @@ fn validate_spec(spec: &ArtifactSpec) -> Result<Vec<(LineageRole, ArtifactRef)>,
         .collect()
 }
 
-fn ensure_name(conn: &Connection, name: &str) -> Result<(), RegistryError> {
+fn ensure_name(conn: &Connection, name: &str) -> Result<(), StoreError> {
     let exists: Option<i64> = conn
         .query_row("SELECT 1 FROM artifacts WHERE name = ?1", [name], |row| {
             row.get(0)
@@ -775,12 +635,13 @@ fn ensure_name(conn: &Connection, name: &str) -> Result<(), RegistryError> {
         Some(_) => Ok(()),
         None => Err(RegistryError::UnknownName {
             name: name.to_string(),
-        }),
+        }
+        .into()),
     }
 }
 
 /// The version number a reference points to, or a not-found error saying what exists.
-fn resolve(conn: &Connection, reference: &ArtifactRef) -> Result<u64, RegistryError> {
+fn resolve(conn: &Connection, reference: &ArtifactRef) -> Result<u64, StoreError> {
     let name = reference.name.as_str();
     match &reference.selector {
         VersionSelector::Version(version) => {
@@ -794,12 +655,14 @@ fn resolve(conn: &Connection, reference: &ArtifactRef) -> Result<u64, RegistryEr
             match latest {
                 None => Err(RegistryError::UnknownName {
                     name: name.to_string(),
-                }),
+                }
+                .into()),
                 Some(latest) if *version > latest as u64 => Err(RegistryError::UnknownVersion {
                     name: name.to_string(),
                     version: *version,
                     latest: latest as u64,
-                }),
+                }
+                .into()),
                 Some(_) => {
                     // Versions are contiguous from 1 (never deleted), so any number up to the latest exists.
                     Ok(*version)
@@ -831,7 +694,8 @@ fn resolve(conn: &Connection, reference: &ArtifactRef) -> Result<u64, RegistryEr
                 name: name.to_string(),
                 alias: alias.clone(),
                 known: known.join(", "),
-            })
+            }
+            .into())
         }
     }
 }
@@ -843,7 +707,7 @@ fn set_alias(
     alias: &str,
     version: u64,
     now: u64,
-) -> Result<(AliasEvent, bool), RegistryError> {
+) -> Result<(AliasEvent, bool), StoreError> {
     let previous: Option<i64> = conn
         .query_row(
             "SELECT version FROM aliases WHERE name = ?1 AND alias = ?2",
@@ -877,15 +741,15 @@ fn set_alias(
     Ok((event, true))
 }
 
-fn corrupt(what: &str, message: impl std::fmt::Display) -> RegistryError {
-    RegistryError::Corrupt {
+fn corrupt(what: &str, message: impl std::fmt::Display) -> StoreError {
+    StoreError::Corrupt {
         what: what.to_string(),
         message: message.to_string(),
     }
 }
 
 /// Read one version's metadata, lineage and current aliases.
-fn load_meta(conn: &Connection, name: &str, version: u64) -> Result<ArtifactMeta, RegistryError> {
+fn load_meta(conn: &Connection, name: &str, version: u64) -> Result<ArtifactMeta, StoreError> {
     let row = conn
         .query_row(
             "SELECT kind, sha256, size, robot, meta_json, created_unix_ms FROM versions WHERE name = ?1 AND version = ?2",
@@ -908,7 +772,8 @@ fn load_meta(conn: &Connection, name: &str, version: u64) -> Result<ArtifactMeta
             name: name.to_string(),
             version,
             latest: 0,
-        });
+        }
+        .into());
     };
     let reference = format!("{name}@{version}");
     let kind: ArtifactKind = kind
@@ -947,7 +812,7 @@ fn load_meta(conn: &Connection, name: &str, version: u64) -> Result<ArtifactMeta
                 sha256: sha,
             })
         })
-        .collect::<Result<Vec<_>, RegistryError>>()?;
+        .collect::<Result<Vec<_>, StoreError>>()?;
     let mut stmt = conn
         .prepare("SELECT alias FROM aliases WHERE name = ?1 AND version = ?2 ORDER BY alias")
         .map_err(sql("reading aliases"))?;
@@ -986,7 +851,7 @@ fn walk(
     conn: &Connection,
     start: &(String, u64),
     direction: Direction,
-) -> Result<Vec<LineageLink>, RegistryError> {
+) -> Result<Vec<LineageLink>, StoreError> {
     let query = match direction {
         Direction::Up => {
             "SELECT name, version, role, parent_name, parent_version FROM lineage WHERE name = ?1 AND version = ?2 ORDER BY rowid"

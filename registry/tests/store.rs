@@ -1,7 +1,7 @@
 //! The store on its own: immutable numbered versions, deduplication, alias moves with history,
 //! lineage, the adapter/core rule, and integrity checks on read.
 
-use l3p_registry::{ArtifactKind, ListFilter, PutRequest, Registry, RegistryError};
+use l3p_registry::{ArtifactKind, ListFilter, PutRequest, Registry, RegistryError, StoreError};
 use l3p_registry::{LineageRole, sha256_hex};
 use serde_json::json;
 
@@ -166,7 +166,10 @@ fn unknown_references_name_what_exists() {
         "{err}"
     );
     let err = reg.get_meta("a1 core@1").unwrap_err();
-    assert!(matches!(err, RegistryError::BadRef(_)), "{err}");
+    assert!(
+        matches!(err, StoreError::Registry(RegistryError::BadRef(_))),
+        "{err}"
+    );
     assert!(
         reg.alias_history("nothing", None)
             .unwrap_err()
@@ -197,7 +200,10 @@ fn invalid_puts_are_refused_and_store_nothing() {
     let mut tampered = core(b"z");
     tampered.expected_sha256 = Some(sha256_hex(b"something else"));
     let err = reg.put(tampered).unwrap_err();
-    assert!(matches!(err, RegistryError::Integrity { .. }), "{err}");
+    assert!(
+        matches!(err, StoreError::Registry(RegistryError::Integrity { .. })),
+        "{err}"
+    );
     let err = reg
         .put(core(b"z").lineage(LineageRole::TrainedAgainst, "missing-core@1"))
         .unwrap_err();
@@ -361,7 +367,10 @@ fn corrupted_blobs_are_refused_on_read() {
         .unwrap();
     }
     let err = reg.get_blob("a1-core@1").unwrap_err();
-    assert!(matches!(err, RegistryError::Integrity { .. }), "{err}");
+    assert!(
+        matches!(err, StoreError::Registry(RegistryError::Integrity { .. })),
+        "{err}"
+    );
     assert!(err.to_string().contains("a1-core@1"), "{err}");
     assert_eq!(reg.get_blob("a1-core@2").unwrap().1, b"other bytes");
     let report = reg.check_integrity().unwrap();

@@ -1,9 +1,10 @@
 //! Workspace tidiness, read from the manifests and sources (in the spirit of rust-analyzer's `tidy`):
 //! project crates depend on each other only along the allowed graph below (ARCHITECTURE.md
-//! "Dependency graph" shows the same list), and every normal dependency is used by its crate's
-//! sources, so an unused one (compile time on two cores) cannot creep back.
+//! "Dependency graph" shows the same list), every normal dependency is used by its crate's sources,
+//! so an unused one (compile time on two cores) cannot creep back, and the crates that reach the
+//! registry only over Zenoh do not link SQLite through another project crate.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
 /// Project crate → the project crates its `[dependencies]` may name.
@@ -12,8 +13,12 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("l3p-net", &[]),
     ("l3p-robots", &[]),
     ("l3p-policy", &[]),
-    ("l3p-registry", &["l3p-proto"]),
-    ("l3p-learner", &["l3p-proto", "l3p-policy", "l3p-registry"]),
+    ("l3p-registry-client", &["l3p-proto"]),
+    ("l3p-registry", &["l3p-proto", "l3p-registry-client"]),
+    (
+        "l3p-learner",
+        &["l3p-proto", "l3p-policy", "l3p-registry-client"],
+    ),
     (
         "l3p-actor",
         &["l3p-proto", "l3p-net", "l3p-policy", "l3p-robots"],
@@ -25,7 +30,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "l3p-net",
             "l3p-policy",
             "l3p-robots",
-            "l3p-registry",
+            "l3p-registry-client",
         ],
     ),
     (
@@ -42,6 +47,15 @@ const ALLOWED: &[(&str, &[&str])] = &[
         ],
     ),
     ("l3p-tests", &[]),
+];
+
+/// Crates that must not link SQLite (`rusqlite`), not even through other project crates: they talk
+/// to the registry over Zenoh with `l3p-registry-client`; only `l3p-registry` holds the store.
+const WITHOUT_SQLITE: &[&str] = &[
+    "l3p-registry-client",
+    "l3p-learner",
+    "l3p-actor",
+    "l3p-deploy",
 ];
 
 /// Dependencies present for their features or for a dependency's build, not named in the source.
@@ -162,5 +176,51 @@ fn every_normal_dependency_is_used_by_its_crate() {
         unused.is_empty(),
         "dependencies not named in their crate's src/ (remove them, or move them to \
          [dev-dependencies], or list them in USED_WITHOUT_NAMING with the reason): {unused:#?}"
+    );
+}
+
+/// The project crates `start` links (itself included), following `[dependencies]` only: dev- and
+/// build-dependencies do not end up in its library or binaries.
+fn linked_project_crates<'a>(members: &'a [Member], start: &str) -> Vec<&'a Member> {
+    let by_name: BTreeMap<&str, &Member> = members.iter().map(|m| (m.name.as_str(), m)).collect();
+    let mut seen = BTreeSet::from([start]);
+    let mut stack = vec![start];
+    let mut linked = Vec::new();
+    while let Some(name) = stack.pop() {
+        let member = by_name
+            .get(name)
+            .unwrap_or_else(|| panic!("{name} is not a workspace member"));
+        linked.push(*member);
+        for dep in &member.dependencies {
+            if by_name.contains_key(dep.as_str()) && seen.insert(dep.as_str()) {
+                stack.push(dep.as_str());
+            }
+        }
+    }
+    linked
+}
+
+#[test]
+fn zenoh_only_registry_users_do_not_link_sqlite() {
+    let members = members();
+    let sqlite_through = |start: &str| -> Vec<String> {
+        linked_project_crates(&members, start)
+            .into_iter()
+            .filter(|m| m.dependencies.iter().any(|d| d == "rusqlite"))
+            .map(|m| m.name.clone())
+            .collect()
+    };
+    // The walk finds SQLite where it is: the CLI holds the store through `l3p-registry`.
+    assert_eq!(sqlite_through("l3p-cli"), ["l3p-registry"]);
+    let offenders: Vec<String> = WITHOUT_SQLITE
+        .iter()
+        .filter_map(|krate| {
+            let through = sqlite_through(krate);
+            (!through.is_empty()).then(|| format!("{krate} links rusqlite through {through:?}"))
+        })
+        .collect();
+    assert!(
+        offenders.is_empty(),
+        "{offenders:#?}\nhint: depend on l3p-registry-client (the Zenoh client), not l3p-registry"
     );
 }

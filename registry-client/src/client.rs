@@ -1,6 +1,7 @@
 //! [`RegistryClient`]: the async client the learner, actors, deploy controller and CLI use to talk to
-//! a registry service over Zenoh. Its methods mirror [`crate::Registry`]; blobs are hash-checked on
-//! arrival and service-side errors come back as [`RegistryError::Remote`] with their [`ErrorCode`].
+//! a registry service over Zenoh. Its methods mirror the store's (`l3p_registry::Registry`); blobs
+//! are hash-checked on arrival and service-side errors come back as [`RegistryError::Remote`] with
+//! their [`ErrorCode`].
 
 use std::time::{Duration, Instant};
 
@@ -15,10 +16,10 @@ use l3p_proto::{WIRE_VERSION, WireMessage};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
+use crate::core_check::{CoreCheck, check_core};
 use crate::error::RegistryError;
-use crate::store::{
-    CoreCheck, ListFilter, PutOutcome, PutRequest, TagOutcome, check_core, sha256_hex,
-};
+use crate::request::{ListFilter, PutOutcome, PutRequest, TagOutcome};
+use crate::sha256_hex;
 
 /// Longest pause between two tries of a query no registry has answered yet.
 const MAX_RETRY_PAUSE: Duration = Duration::from_millis(500);
