@@ -301,14 +301,24 @@ async fn distributed_training_survives_bad_input_and_dead_processes() {
     );
 
     // 5. Kill the registry: training goes on past several registry checkpoints (every 2
-    // iterations), the uploads wait in the backlog and the failed attempts are counted.
+    // iterations), the uploads wait in the backlog and the failed attempts are counted (an upload
+    // sent within the client's discovery window after the learner started waits for that window
+    // to pass before it counts as failed).
     procs.kill("registry");
     let target = resumed.iteration + 6;
     let outage = watch
         .until(
-            "progress without the registry",
+            "progress without the registry, failed uploads counted",
             Duration::from_secs(180),
-            |r| r.source == "learner" && r.iteration >= target,
+            |r| {
+                r.source == "learner"
+                    && r.iteration >= target
+                    && r.values
+                        .get("registry_failed_attempts")
+                        .copied()
+                        .unwrap_or(0.0)
+                        >= 1.0
+            },
         )
         .await;
     assert!(

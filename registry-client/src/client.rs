@@ -24,12 +24,20 @@ use crate::sha256_hex;
 /// Longest pause between two tries of a query no registry has answered yet.
 const MAX_RETRY_PAUSE: Duration = Duration::from_millis(500);
 
+/// How long after a client is made a query that no registry has matched is sent again: a session
+/// that has just opened (a process started beside its registry, a one-shot CLI command) may not
+/// have learnt of the service's queryable yet. Later, no match means the registry is gone, and the
+/// caller hears it at once (the learner's uploader counts the attempt and backs off).
+pub const DISCOVERY_WINDOW: Duration = Duration::from_secs(5);
+
 /// Client of the registry service. Cheap to clone (the Zenoh session is shared).
 #[derive(Clone)]
 pub struct RegistryClient {
     session: zenoh::Session,
     timeout: Duration,
     blob_timeout: Duration,
+    /// Until then a query no registry has matched is sent again (see [`DISCOVERY_WINDOW`]).
+    discovery_until: Instant,
 }
 
 impl std::fmt::Debug for RegistryClient {
@@ -48,6 +56,7 @@ impl RegistryClient {
             session: session.clone(),
             timeout: Duration::from_secs(10),
             blob_timeout: Duration::from_secs(120),
+            discovery_until: Instant::now() + DISCOVERY_WINDOW,
         }
     }
 
@@ -193,10 +202,10 @@ impl RegistryClient {
 
     /// One query, first reply: payload and attachment, or the service's error.
     ///
-    /// A query that no registry has matched yet (a session that has just opened, before Zenoh has
-    /// propagated the service's queryable) ends at once with no reply; it is sent again, with a
-    /// growing pause, until `timeout` has passed. Retrying is safe for every operation: reads have
-    /// no effect and a put of identical bytes returns the version it already made.
+    /// A query that no registry has matched ends at once with no reply. Within
+    /// [`DISCOVERY_WINDOW`] of the client's creation it is sent again, with a growing pause, until
+    /// `timeout` or the window has passed. Retrying is safe for every operation: reads have no
+    /// effect and a put of identical bytes returns the version it already made.
     async fn query(
         &self,
         op: &str,
@@ -229,7 +238,12 @@ impl RegistryClient {
             if let Ok(reply) = replies.recv_async().await {
                 break reply;
             }
-            let remaining = deadline.saturating_duration_since(Instant::now());
+            if Instant::now() >= self.discovery_until {
+                return Err(RegistryError::NoReply { key, timeout });
+            }
+            let remaining = deadline
+                .min(self.discovery_until)
+                .saturating_duration_since(Instant::now());
             tokio::time::sleep(pause.min(remaining)).await;
             pause = (pause * 2).min(MAX_RETRY_PAUSE);
         };

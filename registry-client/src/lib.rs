@@ -18,7 +18,7 @@ mod core_check;
 mod error;
 mod request;
 
-pub use client::RegistryClient;
+pub use client::{DISCOVERY_WINDOW, RegistryClient};
 pub use core_check::{CoreCheck, check_core};
 pub use error::RegistryError;
 pub use l3p_proto::registry::{
