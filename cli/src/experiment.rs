@@ -66,8 +66,10 @@ pub struct VariantSpec {
     pub d_h: Option<usize>,
     #[serde(default)]
     pub d_z: Option<usize>,
-    /// Environments per actor of the variant's arms (default: the experiment's): e.g. to keep a
-    /// joint pretraining's samples per iteration equal to a single robot's.
+    /// Environments per actor of the variant's own pretraining arms (default: the experiment's):
+    /// e.g. to keep a joint pretraining's samples per iteration equal to a single robot's. Its
+    /// target arms keep the experiment's envs, so they compare with the from-scratch arms at equal
+    /// samples.
     #[serde(default)]
     pub envs: Option<usize>,
     /// How `l3p-transfer` target arms start (default: the base config's, normally `fresh`).
@@ -425,7 +427,9 @@ pub fn plan(spec: &ExperimentSpec, base: &Config) -> anyhow::Result<Vec<Arm>> {
             config.model.d_h = v.d_h.unwrap_or(config.model.d_h);
             config.model.d_z = v.d_z.unwrap_or(config.model.d_z);
             config.ppo.transfer_heads = v.transfer_heads.unwrap_or(config.ppo.transfer_heads);
-            arm_envs = v.envs.unwrap_or(envs);
+            if r.stage == Stage::Pretrain {
+                arm_envs = v.envs.unwrap_or(envs);
+            }
         }
         config.actors = r
             .robots
@@ -1032,7 +1036,9 @@ d_z = 2
             .find(|a| a.name == "anymal-c-mlp-transfer-joint-s1")
             .unwrap();
         assert_eq!(t.depends_on.as_deref(), Some("pretrain-joint-mlp-s1"));
-        assert_eq!(t.config.actors[0].envs, 4);
+        // The variant's envs size its pretraining only: its target arms compare with the
+        // from-scratch arms at the experiment's envs.
+        assert_eq!(t.config.actors[0].envs, 8);
 
         let dz = arms
             .iter()
