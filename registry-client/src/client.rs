@@ -15,9 +15,10 @@ use l3p_proto::registry::{
 use l3p_proto::{WIRE_VERSION, WireMessage};
 use serde::Serialize;
 use serde::de::DeserializeOwned;
+use zenoh::bytes::ZBytes;
 
 use crate::core_check::{CoreCheck, check_core};
-use crate::error::RegistryError;
+use crate::error::{RegistryError, check_blob};
 use crate::request::{ListFilter, PutOutcome, PutRequest, TagOutcome};
 use crate::sha256_hex;
 
@@ -107,14 +108,11 @@ impl RegistryClient {
             });
         };
         let meta = decode::<MetaReply>("pull", &header)?.artifact;
-        let actual = sha256_hex(&bytes);
-        if actual != meta.sha256 || bytes.len() as u64 != meta.size {
-            return Err(RegistryError::Integrity {
-                what: format!("blob received for {}", meta.reference()),
-                expected: meta.sha256,
-                actual,
-            });
-        }
+        check_blob(
+            || format!("blob received for {}", meta.reference()),
+            &meta,
+            &bytes,
+        )?;
         Ok((meta, bytes))
     }
 
@@ -218,6 +216,8 @@ impl RegistryClient {
             key: key.clone(),
             message: e.to_string(),
         };
+        // Reference-counted: a retry does not copy a blob.
+        let (payload, attachment) = (ZBytes::from(payload), attachment.map(ZBytes::from));
         let deadline = Instant::now() + timeout;
         let mut pause = Duration::from_millis(20);
         let reply = loop {

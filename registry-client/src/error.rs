@@ -102,3 +102,21 @@ impl RegistryError {
         self.code() == ErrorCode::NotFound
     }
 }
+
+/// `bytes` are the blob `meta` describes (sha256 and size), else [`RegistryError::Integrity`]
+/// naming `what` was checked: every blob is checked where it is read, in the store and on arrival.
+pub fn check_blob(
+    what: impl FnOnce() -> String,
+    meta: &l3p_proto::registry::ArtifactMeta,
+    bytes: &[u8],
+) -> Result<(), RegistryError> {
+    let actual = l3p_proto::sha256_hex(bytes);
+    if actual != meta.sha256 || bytes.len() as u64 != meta.size {
+        return Err(RegistryError::Integrity {
+            what: what(),
+            expected: meta.sha256.clone(),
+            actual,
+        });
+    }
+    Ok(())
+}

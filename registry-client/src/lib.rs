@@ -20,7 +20,7 @@ mod request;
 
 pub use client::{DISCOVERY_WINDOW, RegistryClient};
 pub use core_check::{CoreCheck, check_core};
-pub use error::RegistryError;
+pub use error::{RegistryError, check_blob};
 pub use l3p_proto::registry::{
     AliasEvent, ArtifactKind, ArtifactMeta, ArtifactRef, ArtifactSpec, ErrorCode, LATEST,
     LineageEdge, LineageGraph, LineageInput, LineageLink, LineageRole, VersionSelector,

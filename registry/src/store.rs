@@ -27,8 +27,8 @@ use l3p_proto::registry::{
     LineageGraph, LineageLink, LineageRole, VersionSelector, validate_alias, validate_name,
 };
 use l3p_registry_client::{
-    CoreCheck, ListFilter, PutOutcome, PutRequest, RegistryError, TagOutcome, check_core,
-    sha256_hex,
+    CoreCheck, ListFilter, PutOutcome, PutRequest, RegistryError, TagOutcome, check_blob,
+    check_core, sha256_hex,
 };
 use rusqlite::{Connection, OpenFlags, OptionalExtension, TransactionBehavior, params};
 use serde::{Deserialize, Serialize};
@@ -435,15 +435,11 @@ impl Registry {
             .map_err(sql("reading the blob"))?;
         tx.finish().map_err(sql("ending a read transaction"))?;
         drop(conn);
-        let actual = sha256_hex(&bytes);
-        if actual != meta.sha256 || bytes.len() as u64 != meta.size {
-            return Err(RegistryError::Integrity {
-                what: format!("stored blob of {}", meta.reference()),
-                expected: meta.sha256,
-                actual,
-            }
-            .into());
-        }
+        check_blob(
+            || format!("stored blob of {}", meta.reference()),
+            &meta,
+            &bytes,
+        )?;
         Ok((meta, bytes))
     }
 
