@@ -11,12 +11,18 @@
 //! their sha256 against the announce; collect a chunk on a blocking thread; publish it with
 //! `CongestionControl::Block` (Zenoh's default `Drop` silently loses large messages); publish episode
 //! metrics; repeat. A restarted actor simply joins at the version currently announced.
+//!
+//! [`simrobot::run_sim_robot`] (`l3p sim-robot`) is the simulator standing in for a real robot on the
+//! deploy controller's keys; it lives here, with the simulator, so that `l3p-deploy` links no rapier.
 
 pub mod announce;
+pub mod simrobot;
+
+pub use simrobot::{SimRobotOptions, SimRobotSummary, run_sim_robot};
 
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use l3p_policy::{DeployPolicy, InferScratch};
+use l3p_infer::{DeployPolicy, InferScratch};
 use l3p_proto::{
     EpisodeStats, MetricsRecord, PolicyAnnounce, RolloutChunk, WeightsBlob, codec, keys,
 };

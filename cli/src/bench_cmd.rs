@@ -298,7 +298,7 @@ fn deploy(a: DeployBenchArgs) -> anyhow::Result<()> {
         let sim = tokio::spawn({
             let cancel = cancel.clone();
             async move {
-                let opts = l3p_deploy::SimRobotOptions {
+                let opts = l3p_actor::SimRobotOptions {
                     robot,
                     robot_id: "bench".into(),
                     state_hz: 200,
@@ -306,7 +306,7 @@ fn deploy(a: DeployBenchArgs) -> anyhow::Result<()> {
                     duration: None,
                     command_timeout_s: 0.1,
                 };
-                l3p_deploy::run_sim_robot(&robot_session, opts, cancel).await
+                l3p_actor::run_sim_robot(&robot_session, opts, cancel).await
             }
         });
         let opts = l3p_deploy::DeployOptions {
@@ -315,6 +315,7 @@ fn deploy(a: DeployBenchArgs) -> anyhow::Result<()> {
             safety: l3p_deploy::SafetyConfig::default(),
             duration: Some(seconds),
             status_every: Duration::from_secs(1),
+            insecure: None,
         };
         let status = l3p_deploy::run_deploy(
             &deploy_session,

@@ -7,52 +7,15 @@ use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
-use l3p_deploy::{DeployOptions, SimRobotOptions};
-use l3p_net::{ZenohSettings, open_session};
+use l3p_actor::SimRobotOptions;
+use l3p_deploy::DeployOptions;
+use l3p_net::{Exposure, ZenohSettings, open_session};
 use l3p_policy::{ExportConfig, cpu_device};
-use l3p_proto::{
-    ControlMode, DeployStatus, OperatorAction, OperatorCommand, WIRE_VERSION, codec, keys,
-};
+use l3p_proto::{OperatorAction, keys};
 use l3p_registry::RegistryClient;
 use l3p_robots::catalog::RobotSpec as Robot;
 
-use crate::config::Config;
-use crate::runtime;
-
-/// How a command joins the Zenoh network.
-#[derive(Debug, Clone, Args)]
-pub struct NetArgs {
-    /// Config file: its [zenoh] section (and [deploy] for `l3p deploy`) is used.
-    #[arg(long)]
-    pub config: Option<PathBuf>,
-    /// Zenoh endpoint to connect to (repeatable); default tcp/127.0.0.1:7447 without --config.
-    #[arg(long)]
-    pub connect: Vec<String>,
-    /// Zenoh endpoint to listen on (repeatable).
-    #[arg(long)]
-    pub listen: Vec<String>,
-}
-
-impl NetArgs {
-    fn load(&self) -> anyhow::Result<(Config, ZenohSettings)> {
-        let config = match &self.config {
-            Some(path) => Config::load(path)?,
-            None => Config::default(),
-        };
-        let mut zenoh = config.zenoh.clone();
-        if self.config.is_none() {
-            zenoh.multicast_scouting = false;
-            zenoh.connect = vec!["tcp/127.0.0.1:7447".into()];
-        }
-        if !self.connect.is_empty() {
-            zenoh.connect = self.connect.clone();
-        }
-        if !self.listen.is_empty() {
-            zenoh.listen = self.listen.clone();
-        }
-        Ok((config, zenoh))
-    }
-}
+use crate::runtime::{self, NetArgs};
 
 #[derive(Debug, Args)]
 pub struct DeployArgs {
@@ -69,12 +32,46 @@ pub struct DeployArgs {
     /// Stop (through damping) after this many seconds; default: until Ctrl-C / SIGTERM.
     #[arg(long)]
     pub duration: Option<f64>,
+    /// Run over links that leave this machine without mutual TLS (a plain `tcp/` endpoint off
+    /// loopback, multicast scouting). Refused without this flag: anyone who reaches such a link can
+    /// command the robot. With it, every status carries a warning.
+    #[arg(long)]
+    pub insecure: bool,
     #[command(flatten)]
     pub net: NetArgs,
 }
 
+/// Why `l3p deploy` may not run over these links, or `Ok(Some(why))` when it may only because
+/// `insecure` says so (see [`DeployArgs::insecure`]).
+pub fn check_deploy_links(zenoh: &ZenohSettings, insecure: bool) -> anyhow::Result<Option<String>> {
+    match zenoh.exposure()? {
+        Exposure::Local | Exposure::Authenticated => Ok(None),
+        Exposure::Unauthenticated(why) if insecure => Ok(Some(why)),
+        Exposure::Unauthenticated(why) => anyhow::bail!(
+            "refusing to command a robot over unauthenticated links: {why}\n\
+             hint: give [zenoh.tls] ca, cert and key (a certificate with CN l3p-deploy, \
+             deploy/certs/README.md) and use tls/ endpoints, keep every endpoint on loopback, or \
+             pass --insecure on a network you trust"
+        ),
+    }
+}
+
+/// A seconds argument as a duration: a clear error, not a panic, for a negative or non-finite value.
+fn seconds_arg(flag: &str, seconds: Option<f64>) -> anyhow::Result<Option<Duration>> {
+    seconds
+        .map(|s| {
+            Duration::try_from_secs_f64(s)
+                .map_err(|e| anyhow::anyhow!("{flag} {s}: {e} (seconds, finite and >= 0)"))
+        })
+        .transpose()
+}
+
 pub fn deploy(args: DeployArgs) -> anyhow::Result<()> {
     let (config, zenoh) = args.net.load()?;
+    let insecure = check_deploy_links(&zenoh, args.insecure)?;
+    if let Some(why) = &insecure {
+        tracing::warn!("--insecure: {why}; anyone who reaches these links can command the robot");
+    }
     let robot = Robot::by_name(&args.robot)?;
     keys::validate_segment("robot id", &args.robot_id)?;
     config
@@ -107,8 +104,9 @@ pub fn deploy(args: DeployArgs) -> anyhow::Result<()> {
             robot,
             robot_id: args.robot_id.clone(),
             safety: config.deploy.clone(),
-            duration: args.duration.map(Duration::from_secs_f64),
+            duration: seconds_arg("--duration", args.duration)?,
             status_every: Duration::from_secs(1),
+            insecure,
         };
         let status = l3p_deploy::run_deploy(&session, loaded, opts, cancel).await?;
         println!("{}", serde_json::to_string(&status)?);
@@ -168,10 +166,10 @@ pub fn sim_robot(args: SimRobotArgs) -> anyhow::Result<()> {
             robot_id: args.robot_id.clone(),
             state_hz: args.state_hz,
             command,
-            duration: args.duration.map(Duration::from_secs_f64),
+            duration: seconds_arg("--duration", args.duration)?,
             command_timeout_s: args.command_timeout,
         };
-        let summary = l3p_deploy::run_sim_robot(&session, opts, cancel).await?;
+        let summary = l3p_actor::run_sim_robot(&session, opts, cancel).await?;
         println!("{}", serde_json::to_string(&summary)?);
         let _ = session.close().await;
         Ok(())
@@ -205,71 +203,22 @@ pub struct OperateArgs {
 /// fire-and-forget, and every request is idempotent), then prints the status.
 pub fn operate(args: OperateArgs) -> anyhow::Result<()> {
     let (_, zenoh) = args.net.load()?;
-    keys::validate_segment("robot id", &args.robot_id)?;
     let action = match args.action {
         OperateAction::Resume => OperatorAction::Resume,
         OperateAction::Damp => OperatorAction::Damp,
         OperateAction::Stop => OperatorAction::Stop,
     };
-    let done = |s: &DeployStatus| match action {
-        OperatorAction::Resume => s.mode == ControlMode::Ramp || s.mode == ControlMode::Policy,
-        OperatorAction::Damp | OperatorAction::Stop => s.mode == ControlMode::Damping,
-    };
-    let rt = runtime::tokio_runtime()?;
-    rt.block_on(async {
+    let timeout = seconds_arg("--timeout", Some(args.timeout))?.unwrap_or_default();
+    runtime::tokio_runtime()?.block_on(async {
         let session = open_session(&zenoh).await?;
-        let status = session
-            .declare_subscriber(keys::robot_deploy_status(&args.robot_id))
-            .await
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
-        let request = codec::encode(&OperatorCommand {
-            wire_version: WIRE_VERSION,
-            robot_id: args.robot_id.clone(),
-            action,
-            stamp_ns: 0,
-        })?;
-        let deadline = tokio::time::Instant::now() + Duration::from_secs_f64(args.timeout);
-        let mut last: Option<DeployStatus> = None;
-        while tokio::time::Instant::now() < deadline {
-            session
-                .put(keys::robot_operator(&args.robot_id), request.clone())
-                .await
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
-            let wait = tokio::time::sleep(Duration::from_millis(400));
-            tokio::pin!(wait);
-            loop {
-                tokio::select! {
-                    _ = &mut wait => break,
-                    sample = status.recv_async() => {
-                        let Ok(sample) = sample else { break };
-                        if let Ok(s) = codec::decode_json::<DeployStatus>(&sample.payload().to_bytes()) {
-                            if done(&s) {
-                                println!("{}", serde_json::to_string(&s)?);
-                                let _ = session.close().await;
-                                return Ok(());
-                            }
-                            last = Some(s);
-                        }
-                    }
-                }
-            }
-        }
+        let result = l3p_deploy::operate(&session, &args.robot_id, action, timeout).await;
         let _ = session.close().await;
-        match last {
-            Some(s) => anyhow::bail!(
-                "{:?} had no effect: controller {} is in {:?}{}",
-                args.action,
-                args.robot_id,
-                s.mode,
-                s.fault.map(|f| format!(" ({f})")).unwrap_or_default()
-            ),
-            None => anyhow::bail!(
-                "no deploy controller answered for robot id {} within {} s\nhint: is `l3p deploy --robot-id {}` running and connected to the same Zenoh network?",
-                args.robot_id,
-                args.timeout,
-                args.robot_id
-            ),
+        let status = result?;
+        if let Some(warning) = &status.warning {
+            eprintln!("warning: controller {}: {warning}", args.robot_id);
         }
+        println!("{}", serde_json::to_string(&status)?);
+        Ok(())
     })
 }
 
@@ -324,7 +273,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
         })?
     };
     // Only checkpoints without an `io` get one here: they predate the clock and the filter.
-    let env_for = |obs_dim: usize| l3p_deploy::io::env_for_policy(&config.env, obs_dim, None);
+    let env_for = |obs_dim: usize| l3p_robots::io::env_for_policy(&config.env, obs_dim, None);
     let (export, export_config) = if l3p_policy::is_checkpoint(&bytes) {
         let mut ckpt = l3p_policy::checkpoint_from_bytes(&bytes, &cpu_device())?;
         let names: Vec<String> = ckpt.model.robots.iter().map(|r| r.name.clone()).collect();
@@ -341,7 +290,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
             .ok_or_else(|| anyhow::anyhow!("the checkpoint has no {name} (it has {names:?})"))?;
         let spec = &mut ckpt.model.robots[idx];
         if spec.io.is_none() {
-            spec.io = Some(l3p_deploy::robot_io(
+            spec.io = Some(l3p_robots::io::robot_io(
                 Robot::by_name(&name)?,
                 &env_for(spec.obs_dim),
             )?);
@@ -356,7 +305,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
             anyhow::bail!("{} is a policy for {}, not {r}", args.source, cfg.robot);
         }
         if cfg.io.is_none() {
-            cfg.io = Some(l3p_deploy::robot_io(
+            cfg.io = Some(l3p_robots::io::robot_io(
                 Robot::by_name(&cfg.robot)?,
                 &env_for(cfg.obs_dim),
             )?);

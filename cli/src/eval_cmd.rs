@@ -201,7 +201,7 @@ pub fn evaluate_row(
     action_filter_alpha: Option<f32>,
 ) -> anyhow::Result<EvalRow> {
     // The policy's own observation and action contract, whatever the config says.
-    let mut env = l3p_deploy::io::sim_env_for_policy(env, &policy.config, robot.name);
+    let mut env = l3p_robots::io::sim_env_for_policy(env, &policy.config, robot.name);
     if let Some(alpha) = action_filter_alpha {
         env.action_filter_alpha = alpha;
     }
@@ -229,7 +229,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     config.env.terrain.preset = terrain_preset(&args.terrain)?;
     // A blind policy runs without the height scan (evaluate_row applies the whole contract).
     config.env =
-        l3p_deploy::io::env_for_policy(&config.env, policy.obs_dim(), policy.config.io.as_ref());
+        l3p_robots::io::env_for_policy(&config.env, policy.obs_dim(), policy.config.io.as_ref());
     if let Some(range) = &args.lin_vel_x {
         if range.len() != 2 || range[0] > range[1] {
             anyhow::bail!("--lin-vel-x takes MIN,MAX with MIN <= MAX, got {range:?}");

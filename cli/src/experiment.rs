@@ -411,6 +411,7 @@ pub fn plan(spec: &ExperimentSpec, base: &Config) -> anyhow::Result<Vec<Arm>> {
         let mut config = base.clone();
         config.run.name = r.name.clone();
         config.run.seed = r.seed;
+        config.ppo.seed = r.seed;
         config.run.data_dir = dir.join(&r.name);
         config.ppo.mode = r.method;
         config.learner.max_iterations = r.iterations;
@@ -932,7 +933,7 @@ terrain = "flat"
         assert_eq!(t.stage, Stage::Target);
         assert_eq!(t.depends_on.as_deref(), Some("pretrain-l3p-s2"));
         assert_eq!(t.config.ppo.mode, Mode::L3pTransfer);
-        assert_eq!(t.config.run.seed, 2);
+        assert_eq!((t.config.run.seed, t.config.ppo.seed), (2, 2));
         assert_eq!(t.config.learner.max_iterations, 20);
         assert_eq!(t.config.actors[0].robot, "anymal_c");
         assert_eq!(

@@ -294,10 +294,11 @@ fn run_cmd(spec_path: &Path) -> anyhow::Result<()> {
     let done = arms.iter().filter(|a| read_done(a).is_some()).count();
     println!("{done}/{} arms done", arms.len());
     if cancel.is_cancelled() {
-        anyhow::bail!(
+        return Err(runtime::Interrupted(format!(
             "interrupted\nhint: rerun `l3p experiment run {}` to resume",
             spec_path.display()
-        );
+        ))
+        .into());
     }
     if !failed.is_empty() {
         anyhow::bail!(

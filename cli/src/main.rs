@@ -1,7 +1,10 @@
 //! `l3p` — the command-line entry point. Argument parsing and glue only: every command calls into a
 //! library crate (see ARCHITECTURE.md).
 
+use std::process::ExitCode;
+
 use clap::{Parser, Subcommand};
+use l3p_cli::runtime::Interrupted;
 
 mod logging;
 
@@ -51,13 +54,30 @@ enum Command {
     Experiment(l3p_cli::experiment_cmd::ExperimentArgs),
 }
 
-fn main() -> anyhow::Result<()> {
+fn main() -> ExitCode {
     keep_large_allocations_on_the_heap();
     logging::init();
     let cli = Cli::parse();
     // Robots added with `l3p robots add` ($L3P_ROBOTS_DIR, else ./l3p-data/robots).
     l3p_cli::robots_cmd::load_added_robots(None);
-    match cli.command {
+    match run(cli.command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => match e.downcast_ref::<Interrupted>() {
+            Some(interrupted) => {
+                eprintln!("{interrupted}");
+                ExitCode::from(130)
+            }
+            // As `main` returning the error would print it (with a backtrace when asked for).
+            None => {
+                eprintln!("Error: {e:?}");
+                ExitCode::FAILURE
+            }
+        },
+    }
+}
+
+fn run(command: Command) -> anyhow::Result<()> {
+    match command {
         Command::Train(args) => l3p_cli::train_cmd::run(args),
         Command::Transfer(args) => l3p_cli::transfer_cmd::run(args),
         Command::Learner(args) => l3p_cli::learner_cmd::run(args),

@@ -4,10 +4,9 @@ use std::io::BufRead;
 use std::path::PathBuf;
 
 use clap::Args;
-use l3p_net::ZenohSettings;
 use l3p_proto::{MetricsRecord, codec, keys};
 
-use crate::runtime;
+use crate::runtime::{self, NetArgs};
 
 #[derive(Debug, Args)]
 pub struct MetricsArgs {
@@ -23,9 +22,10 @@ pub struct MetricsArgs {
     /// Data directory of the run (for the file, and the endpoint of a local-mode run).
     #[arg(long, default_value = "l3p-data")]
     pub data_dir: PathBuf,
-    /// Zenoh endpoint to connect to (default: the local-mode run's endpoint file, else scouting).
-    #[arg(long)]
-    pub connect: Vec<String>,
+    /// With --follow: how to reach the run. Without --config and --connect, the local-mode run's
+    /// endpoint file (`<data-dir>/<run>/endpoint`), else `tcp/127.0.0.1:7447`.
+    #[command(flatten)]
+    pub net: NetArgs,
 }
 
 const COLUMNS: [(&str, &str); 7] = [
@@ -72,17 +72,12 @@ pub fn run(args: MetricsArgs) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    let mut settings = ZenohSettings::default();
-    let connect = if args.connect.is_empty() {
-        std::fs::read_to_string(run_dir.join("endpoint"))
-            .map(|s| vec![s.trim().to_string()])
-            .unwrap_or_default()
-    } else {
-        args.connect.clone()
-    };
-    if !connect.is_empty() {
-        settings.connect = connect;
-        settings.multicast_scouting = false;
+    let (_, mut settings) = args.net.load()?;
+    if args.net.config.is_none()
+        && args.net.connect.is_empty()
+        && let Ok(endpoint) = std::fs::read_to_string(run_dir.join("endpoint"))
+    {
+        settings.connect = vec![endpoint.trim().to_string()];
     }
     runtime::tokio_runtime()?.block_on(async move {
         let cancel = runtime::cancel_on_signal();

@@ -1,6 +1,7 @@
 //! `l3p registry serve|list|show|pull|put|tag|history|lineage`: the artifact registry from the
 //! command line. `serve` runs the Zenoh service on a local database; the other commands talk to a
-//! running service through Zenoh (`--connect`, default `tcp/127.0.0.1:7447`), or, with `--data <dir>`,
+//! running service through Zenoh (`--connect`, default `tcp/127.0.0.1:7447`, or `--config` for a
+//! config's `[zenoh]` with its TLS), or, with `--data <dir>`,
 //! open `<dir>/registry.db` directly without any service (SQLite locking keeps that safe next to a
 //! running service).
 
@@ -11,10 +12,12 @@ use anyhow::Context;
 use clap::{Args, Subcommand};
 use l3p_net::{ZenohSettings, open_session};
 use l3p_registry::{
-    AliasEvent, ArtifactKind, ArtifactMeta, LineageGraph, LineageRole, ListFilter, PutOutcome,
-    PutRequest, Registry, RegistryClient, TagOutcome,
+    ArtifactKind, ArtifactMeta, LineageRole, ListFilter, PutRequest, Registry, RegistryAccess,
+    RegistryClient,
 };
 use tokio_util::sync::CancellationToken;
+
+use crate::runtime::NetArgs;
 
 #[derive(Debug, Args)]
 pub struct RegistryArgs {
@@ -22,12 +25,12 @@ pub struct RegistryArgs {
     pub command: RegistryCommand,
 }
 
-/// Where client commands find the registry.
+/// Where client commands find the registry: a service over Zenoh (the network flags every command
+/// shares), or the database itself.
 #[derive(Debug, Clone, Args)]
 pub struct Target {
-    /// Zenoh endpoint of the registry service (repeatable).
-    #[arg(long, default_value = "tcp/127.0.0.1:7447")]
-    pub connect: Vec<String>,
+    #[command(flatten)]
+    pub net: NetArgs,
     /// Read and write `<dir>/registry.db` directly instead of asking a service.
     #[arg(long)]
     pub data: Option<PathBuf>,
@@ -141,81 +144,14 @@ pub fn run(args: RegistryArgs) -> anyhow::Result<()> {
     runtime.block_on(run_async(args.command))
 }
 
-/// The registry a client command talks to.
-enum Backend {
-    Local(Registry),
-    Remote(RegistryClient),
-}
-
-impl Backend {
-    async fn connect(target: &Target) -> anyhow::Result<Self> {
-        if let Some(dir) = &target.data {
-            return Ok(Self::Local(Registry::open(dir)?));
-        }
-        let settings = ZenohSettings {
-            mode: "peer".into(),
-            listen: Vec::new(),
-            connect: target.connect.clone(),
-            multicast_scouting: false,
-            config_file: None,
-        };
-        let session = open_session(&settings).await?;
-        Ok(Self::Remote(RegistryClient::new(&session)))
+/// The registry a client command talks to: `--data`'s database, else a service over Zenoh.
+async fn connect(target: &Target) -> anyhow::Result<RegistryAccess> {
+    if let Some(dir) = &target.data {
+        return Ok(RegistryAccess::Local(Registry::open(dir)?));
     }
-
-    async fn list(&self, filter: &ListFilter) -> anyhow::Result<Vec<ArtifactMeta>> {
-        Ok(match self {
-            Self::Local(r) => r.list(filter)?,
-            Self::Remote(c) => c.list(filter).await?,
-        })
-    }
-
-    async fn get_meta(&self, reference: &str) -> anyhow::Result<ArtifactMeta> {
-        Ok(match self {
-            Self::Local(r) => r.get_meta(reference)?,
-            Self::Remote(c) => c.get_meta(reference).await?,
-        })
-    }
-
-    async fn get_blob(&self, reference: &str) -> anyhow::Result<(ArtifactMeta, Vec<u8>)> {
-        Ok(match self {
-            Self::Local(r) => r.get_blob(reference)?,
-            Self::Remote(c) => c.get_blob(reference).await?,
-        })
-    }
-
-    async fn put(&self, req: PutRequest) -> anyhow::Result<PutOutcome> {
-        Ok(match self {
-            Self::Local(r) => r.put(req)?,
-            Self::Remote(c) => c.put(req).await?,
-        })
-    }
-
-    async fn tag(&self, reference: &str, alias: &str) -> anyhow::Result<TagOutcome> {
-        Ok(match self {
-            Self::Local(r) => r.tag(reference, alias)?,
-            Self::Remote(c) => c.tag(reference, alias).await?,
-        })
-    }
-
-    async fn history(&self, name: &str, alias: Option<&str>) -> anyhow::Result<Vec<AliasEvent>> {
-        Ok(match self {
-            Self::Local(r) => r.alias_history(name, alias)?,
-            Self::Remote(c) => c.alias_history(name, alias).await?,
-        })
-    }
-
-    async fn lineage(&self, reference: &str) -> anyhow::Result<LineageGraph> {
-        Ok(match self {
-            Self::Local(r) => r.lineage(reference)?,
-            Self::Remote(c) => c.lineage(reference).await?,
-        })
-    }
-
-    /// Release the backend (the Zenoh session closes when its last handle drops).
-    async fn close(self) {
-        drop(self);
-    }
+    let (_, settings) = target.net.load()?;
+    let session = open_session(&settings).await?;
+    Ok(RegistryAccess::Remote(RegistryClient::new(&session)))
 }
 
 async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
@@ -234,14 +170,13 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             json,
             target,
         } => {
-            let backend = Backend::connect(&target).await?;
-            let artifacts = backend.list(&ListFilter { kind, name, robot }).await?;
+            let registry = connect(&target).await?;
+            let artifacts = registry.list(&ListFilter { kind, name, robot }).await?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&artifacts)?);
             } else {
                 print_table(&artifacts);
             }
-            backend.close().await;
             Ok(())
         }
         RegistryCommand::Show {
@@ -249,14 +184,13 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             json,
             target,
         } => {
-            let backend = Backend::connect(&target).await?;
-            let meta = backend.get_meta(&artifact).await?;
+            let registry = connect(&target).await?;
+            let meta = registry.get_meta(&artifact).await?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&meta)?);
             } else {
                 print_meta(&meta)?;
             }
-            backend.close().await;
             Ok(())
         }
         RegistryCommand::Pull {
@@ -264,8 +198,8 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             output,
             target,
         } => {
-            let backend = Backend::connect(&target).await?;
-            let (meta, bytes) = backend.get_blob(&artifact).await?;
+            let registry = connect(&target).await?;
+            let (meta, bytes) = registry.get_blob(&artifact).await?;
             l3p_policy::write_atomic(&output, &bytes)
                 .with_context(|| format!("cannot write {}", output.display()))?;
             println!(
@@ -275,7 +209,6 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
                 meta.size,
                 meta.sha256
             );
-            backend.close().await;
             Ok(())
         }
         RegistryCommand::Put {
@@ -307,8 +240,8 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             for alias in &alias {
                 req = req.alias(alias);
             }
-            let backend = Backend::connect(&target).await?;
-            let outcome = backend.put(req).await?;
+            let registry = connect(&target).await?;
+            let outcome = registry.put(req).await?;
             let what = if outcome.created {
                 "stored"
             } else {
@@ -319,7 +252,6 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
                 outcome.meta.reference(),
                 outcome.meta.sha256
             );
-            backend.close().await;
             Ok(())
         }
         RegistryCommand::Tag {
@@ -327,8 +259,8 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             alias,
             target,
         } => {
-            let backend = Backend::connect(&target).await?;
-            let outcome = backend.tag(&artifact, &alias).await?;
+            let registry = connect(&target).await?;
+            let outcome = registry.tag(&artifact, &alias).await?;
             let e = &outcome.event;
             match (outcome.moved, e.previous) {
                 (false, _) => println!(
@@ -340,7 +272,6 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
                 }
                 (true, None) => println!("{}@{}: new -> {}", e.name, e.alias, e.version),
             }
-            backend.close().await;
             Ok(())
         }
         RegistryCommand::History {
@@ -349,8 +280,8 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             json,
             target,
         } => {
-            let backend = Backend::connect(&target).await?;
-            let events = backend.history(&name, alias.as_deref()).await?;
+            let registry = connect(&target).await?;
+            let events = registry.alias_history(&name, alias.as_deref()).await?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&events)?);
             } else {
@@ -369,7 +300,6 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
                     );
                 }
             }
-            backend.close().await;
             Ok(())
         }
         RegistryCommand::Lineage {
@@ -377,8 +307,8 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             json,
             target,
         } => {
-            let backend = Backend::connect(&target).await?;
-            let graph = backend.lineage(&artifact).await?;
+            let registry = connect(&target).await?;
+            let graph = registry.lineage(&artifact).await?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&graph)?);
             } else {
@@ -392,7 +322,6 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
                     println!("  {} --{}--> {}", link.child, link.role, link.parent);
                 }
             }
-            backend.close().await;
             Ok(())
         }
     }
@@ -412,6 +341,7 @@ async fn serve(
         connect,
         multicast_scouting: scouting,
         config_file,
+        tls: None,
     };
     let session = open_session(&settings).await?;
     let cancel = CancellationToken::new();

@@ -1,10 +1,67 @@
-//! Shared glue of the daemon commands: the tokio runtime, Ctrl-C → cancellation, and the policy's
-//! view of the configured robots.
+//! Shared glue of the daemon commands: [`NetArgs`] (the network flags of every command that joins
+//! Zenoh), the tokio runtime, Ctrl-C → cancellation ([`Interrupted`]), and the policy's view of the
+//! configured robots.
 
+use std::path::PathBuf;
+
+use clap::Args;
+use l3p_net::ZenohSettings;
 use l3p_robots::catalog::RobotSpec as Robot;
 use tokio_util::sync::CancellationToken;
 
 use crate::config::Config;
+
+/// How a command joins the Zenoh network.
+#[derive(Debug, Clone, Args)]
+pub struct NetArgs {
+    /// Config file: its [zenoh] section (with [zenoh.tls]) is used, and [deploy] by `l3p deploy`.
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Zenoh endpoint to connect to (repeatable); default tcp/127.0.0.1:7447 without --config.
+    #[arg(long)]
+    pub connect: Vec<String>,
+    /// Zenoh endpoint to listen on (repeatable).
+    #[arg(long)]
+    pub listen: Vec<String>,
+}
+
+impl NetArgs {
+    /// The run config (defaults without `--config`) and the Zenoh settings: the config's `[zenoh]`
+    /// (with `[zenoh.tls]`), else a peer that connects to `tcp/127.0.0.1:7447` and listens nowhere;
+    /// `--connect`/`--listen` replace its endpoints.
+    pub fn load(&self) -> anyhow::Result<(Config, ZenohSettings)> {
+        let config = match &self.config {
+            Some(path) => Config::load(path)?,
+            None => Config::default(),
+        };
+        let mut zenoh = config.zenoh.clone();
+        if self.config.is_none() {
+            zenoh.multicast_scouting = false;
+            zenoh.connect = vec!["tcp/127.0.0.1:7447".into()];
+        }
+        if !self.connect.is_empty() {
+            zenoh.connect = self.connect.clone();
+        }
+        if !self.listen.is_empty() {
+            zenoh.listen = self.listen.clone();
+        }
+        Ok((config, zenoh))
+    }
+}
+
+/// The command stopped because its user asked it to (Ctrl-C, SIGTERM) and left its work resumable:
+/// an expected end, which `main` reports as its message and exit status 130 — never with the
+/// backtrace that `RUST_BACKTRACE=1` adds to a failure.
+#[derive(Debug)]
+pub struct Interrupted(pub String);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
 
 /// A multi-threaded tokio runtime for Zenoh and the daemon loops (heavy work runs on blocking threads).
 pub fn tokio_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
@@ -78,7 +135,7 @@ pub fn policy_robot(config: &Config, robot: &Robot) -> anyhow::Result<l3p_policy
         obs_dim: obs_dim(config),
         action_dim: l3p_robots::catalog::NUM_JOINTS,
         action_scale: robot.action_scale,
-        io: Some(l3p_deploy::robot_io(robot, &config.env)?),
+        io: Some(l3p_robots::io::robot_io(robot, &config.env)?),
     })
 }
 

@@ -465,3 +465,61 @@ async fn nan_policy_is_damped_and_wrong_robot_is_refused_before_any_command() {
     )
     .await;
 }
+
+/// Off loopback without mutual TLS `l3p deploy` refuses to start, before it opens a session or reads
+/// a policy; `--insecure` gets it past that check with a warning (here it then fails on the policy
+/// file, as it would on loopback).
+#[test]
+fn deploy_refuses_unauthenticated_links_off_loopback_unless_insecure() {
+    let dir = tempfile::tempdir().unwrap();
+    let policy = dir.path().join("policy.safetensors");
+    std::fs::write(&policy, b"not a policy").unwrap();
+    let policy = policy.display().to_string();
+    // Every interface: reachable from the network.
+    let listen = format!("tcp/0.0.0.0:{}", free_loopback_port().unwrap());
+    let deploy = |extra: &[&str]| {
+        let mut args = vec![
+            "deploy",
+            "--robot",
+            "a1",
+            "--robot-id",
+            "dog",
+            "--policy",
+            &policy,
+            "--listen",
+            &listen,
+        ];
+        args.extend_from_slice(extra);
+        let out = l3p(&args);
+        (
+            out.status,
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+
+    let (status, stderr) = deploy(&[]);
+    assert!(!status.success(), "{stderr}");
+    assert!(
+        stderr.contains("refusing to command a robot over unauthenticated links")
+            && stderr.contains(&listen)
+            && stderr.contains("--insecure"),
+        "{stderr}"
+    );
+    assert!(
+        !stderr.contains(&policy),
+        "refused before the policy is read: {stderr}"
+    );
+
+    let (status, stderr) = deploy(&["--insecure"]);
+    assert!(!status.success(), "{stderr}");
+    assert!(!stderr.contains("refusing"), "{stderr}");
+    assert!(
+        stderr.contains("--insecure:") && stderr.contains(&listen),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains(&policy),
+        "the policy file is what fails: {stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}

@@ -116,9 +116,11 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
         .args(["experiment", "run", "micro.toml"])
         .current_dir(cwd)
         .process_group(0)
+        // Asked for, a backtrace must still not decorate an interruption (an expected end).
+        .env("RUST_BACKTRACE", "1")
         .stdin(Stdio::null())
         .stdout(Stdio::null())
-        .stderr(Stdio::null())
+        .stderr(std::fs::File::create(cwd.join("run.err")).unwrap())
         .spawn()
         .unwrap();
     let deadline = Instant::now() + Duration::from_secs(120);
@@ -138,7 +140,11 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
         .status()
         .unwrap();
     assert!(status.success());
-    run.wait().unwrap();
+    let exit = run.wait().unwrap();
+    let err = std::fs::read_to_string(cwd.join("run.err")).unwrap();
+    assert_eq!(exit.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted\nhint: rerun"), "{err}");
+    assert!(!err.to_lowercase().contains("backtrace"), "{err}");
     // Wait for the trainer (same group) to write its final checkpoint and exit.
     let deadline = Instant::now() + Duration::from_secs(60);
     while Path::new(&format!("/proc/{}", pid_of(&exp.join("pretrain-l3p-s1")))).exists() {

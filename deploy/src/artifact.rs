@@ -5,14 +5,15 @@
 
 use std::path::Path;
 
-use l3p_policy::{DeployPolicy, RobotIo};
+use l3p_infer::{DeployPolicy, RobotIo};
 use l3p_proto::registry::{ArtifactKind, ArtifactMeta};
 use l3p_registry_client::RegistryClient;
 use l3p_robots::catalog::RobotSpec;
 use l3p_robots::config::EnvConfig;
+use l3p_robots::io::{env_for_policy, robot_io};
 
 use crate::DeployError;
-use crate::io::{ObservationBuilder, env_for_policy, robot_io, standing_state};
+use crate::io::{ObservationBuilder, standing_state};
 
 /// A policy checked against its robot, ready to arm.
 #[derive(Debug, Clone)]
@@ -72,7 +73,8 @@ pub fn load_policy(
         Some(io) => (io.clone(), false),
         None => {
             let env = env_for_policy(&EnvConfig::default(), config.obs_dim, None);
-            (robot_io(robot, &env)?, true)
+            let io = robot_io(robot, &env).map_err(|e| DeployError::Robot(e.to_string()))?;
+            (io, true)
         }
     };
     io.check(config.obs_dim, config.action_dim)

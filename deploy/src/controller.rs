@@ -13,7 +13,7 @@
 //! Safety does not depend on the policy: targets are clipped to the soft joint limits in every mode;
 //! damping (kp = 0, kd > 0) is latched and left only on an explicit operator `Resume`.
 
-use l3p_policy::RobotIo;
+use l3p_infer::RobotIo;
 use l3p_proto::{ControlMode, OperatorAction, RobotCommand, RobotState, WIRE_VERSION};
 use l3p_robots::task::{filtered_action, projected_gravity};
 use serde::{Deserialize, Serialize};
@@ -143,17 +143,17 @@ pub trait PolicyFn {
 
 /// A loaded export with its inference buffers (allocation-free after the first tick).
 pub struct ExportedPolicy {
-    pub policy: l3p_policy::DeployPolicy,
+    pub policy: l3p_infer::DeployPolicy,
     out: Vec<f32>,
-    scratch: l3p_policy::InferScratch,
+    scratch: l3p_infer::InferScratch,
 }
 
 impl ExportedPolicy {
-    pub fn new(policy: l3p_policy::DeployPolicy) -> Self {
+    pub fn new(policy: l3p_infer::DeployPolicy) -> Self {
         Self {
             policy,
             out: Vec::new(),
-            scratch: l3p_policy::InferScratch::default(),
+            scratch: l3p_infer::InferScratch::default(),
         }
     }
 }

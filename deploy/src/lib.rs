@@ -4,25 +4,30 @@
 //! [`artifact::fetch_policy`], [`artifact::read_policy_file`]), [`controller::Controller`] (the
 //! safety state machine: zero-torque → ramp → policy, watchdog → latched damping),
 //! [`runtime::run_deploy`] (the deadline loop with Zenoh I/O), [`latest::LatestSlot`] (latest-value
-//! subscriber for robot state and commands), [`simrobot::run_sim_robot`] (the
-//! simulator as a stand-in robot on the same keys), [`io::robot_io`] and
-//! [`io::ObservationBuilder`] (the policy's robot I/O contract and observations built exactly as in
-//! training).
+//! subscriber for robot state and commands), [`operate::operate`] (an operator's request to a
+//! running controller, resent until its status confirms it), [`io::ObservationBuilder`] (the
+//! observation of a wire robot state, built exactly as in training, for the I/O contract that
+//! `l3p_robots::io::robot_io` makes).
+//!
+//! Architecture invariant: no burn, no rapier, no SQLite — a policy runs through `l3p-infer`, the
+//! robot is known through `l3p-robots` without its `sim` feature, the registry through its Zenoh
+//! client. The simulated robot that stands in for hardware (`l3p sim-robot`) lives with the
+//! simulator, in `l3p-actor`.
 
 pub mod artifact;
 pub mod controller;
 pub mod io;
 pub mod latest;
+pub mod operate;
 pub mod pacer;
 pub mod runtime;
-pub mod simrobot;
 pub mod stats;
 
 pub use artifact::{LoadedPolicy, fetch_policy, load_policy, read_policy_file};
 pub use controller::{Controller, Fault, SafetyConfig};
-pub use io::{ObservationBuilder, robot_io};
+pub use io::ObservationBuilder;
+pub use operate::{OperateError, operate};
 pub use runtime::{DeployOptions, run_deploy};
-pub use simrobot::{SimRobotOptions, SimRobotSummary, run_sim_robot};
 
 /// Why a policy cannot be deployed or the controller stopped.
 #[derive(Debug, thiserror::Error)]

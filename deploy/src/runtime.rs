@@ -37,6 +37,9 @@ pub struct DeployOptions {
     pub duration: Option<Duration>,
     /// How often the status is published.
     pub status_every: Duration,
+    /// Why the Zenoh links are not authenticated, when the operator accepted that (`l3p deploy
+    /// --insecure`): logged as a warning and carried in every status.
+    pub insecure: Option<String>,
 }
 
 /// Timing samples kept for percentiles: 10 minutes at 50 Hz.
@@ -122,6 +125,7 @@ pub async fn run_deploy(
             period_error_p99_us: 0.0,
             inference_p50_us: 0.0,
             inference_p99_us: 0.0,
+            warning: opts.insecure.clone(),
         },
     };
     let period = Duration::from_secs_f32(loaded.io.control_dt);
@@ -243,6 +247,11 @@ fn control_loop(
             s.status.rejected_states = states.rejected();
             (s.status.period_error_p50_us, s.status.period_error_p99_us) = period_error.p50_p99();
             (s.status.inference_p50_us, s.status.inference_p99_us) = inference.p50_p99();
+            if let Some(why) = &opts.insecure {
+                warn!(
+                    "unauthenticated links (--insecure): {why}; anyone who reaches them can command this robot"
+                );
+            }
             if let Ok(json) = codec::encode_json(&s.status)
                 && let Err(e) = publish_status(json)
             {

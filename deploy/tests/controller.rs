@@ -4,11 +4,12 @@
 
 use l3p_deploy::controller::{Latest, PolicyFn};
 use l3p_deploy::io::standing_state;
-use l3p_deploy::{Controller, Fault, ObservationBuilder, SafetyConfig, load_policy, robot_io};
+use l3p_deploy::{Controller, Fault, ObservationBuilder, SafetyConfig, load_policy};
 use l3p_policy::RobotIo;
 use l3p_proto::{ControlMode, OperatorAction, RobotState};
 use l3p_robots::catalog::RobotSpec;
 use l3p_robots::config::{EnvConfig, GainsOverride, TerrainPreset};
+use l3p_robots::io::robot_io;
 use l3p_robots::task::{Task, TaskEnvState, quat_from_yaw_and_tilt, quat_rotate_inverse};
 use l3p_robots::terrain::Terrain;
 use rand::rngs::StdRng;
@@ -673,12 +674,12 @@ fn a_policy_is_simulated_at_its_own_gains_on_its_own_robot_only() {
     );
     let mut env = flat_env();
     env.randomization.kp_scale = Some([0.8, 1.0]); // centre 0.9: io / 0.9 × 0.9 = io again
-    let sim = l3p_deploy::io::sim_env_for_policy(&env, &policy, "a1");
+    let sim = l3p_robots::io::sim_env_for_policy(&env, &policy, "a1");
     let gains = sim.training_gains(a1());
     assert!((gains.kp * 0.9 - io.kp[0]).abs() < 1e-3, "{gains:?}");
     assert!((gains.kd - io.kd[0]).abs() < 1e-4, "{gains:?}");
     assert_eq!(sim.gait_clock_hz, io.gait_clock_hz);
     let go1 = RobotSpec::by_name("go1").unwrap();
-    let other = l3p_deploy::io::sim_env_for_policy(&env, &policy, "go1");
+    let other = l3p_robots::io::sim_env_for_policy(&env, &policy, "go1");
     assert_eq!(other.training_gains(go1), go1.training_gains);
 }

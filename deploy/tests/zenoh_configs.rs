@@ -1,7 +1,8 @@
 //! The Zenoh configs under `deploy/zenoh/` (DESIGN §8–9): every file parses with the Zenoh version
 //! we build against, the ACL denies by default and gives the robot-command key to the deploy
 //! controller alone, and — when `openssl` is installed — a router started from `router-acl.json5`
-//! with generated certificates really enforces that over mutual TLS.
+//! with generated certificates really enforces that over mutual TLS, for clients set up by
+//! `client-tls.json5` and by an l3p config's `[zenoh.tls]` alike.
 //!
 //! `zenoh::Config::from_file` checks the JSON5 syntax and the schema (unknown keys, types, enum
 //! values) but does not open the TLS files it names: they are read when a TLS link is set up. The
@@ -405,6 +406,29 @@ fn open_client(dir: &Path, port: u16, cn: &str) -> Session {
         .unwrap_or_else(|e| panic!("open client {cn}: {e}"))
 }
 
+/// A client set up the way an l3p config does it: `[zenoh.tls]` ([`l3p_net::TlsSettings`]), no
+/// Zenoh file.
+fn open_client_with_tls_settings(dir: &Path, port: u16, cn: &str) -> Session {
+    let settings = l3p_net::ZenohSettings {
+        mode: "client".into(),
+        connect: vec![format!("tls/127.0.0.1:{port}")],
+        tls: Some(l3p_net::TlsSettings {
+            ca: dir.join("ca.pem"),
+            cert: dir.join(format!("{cn}.pem")),
+            key: dir.join(format!("{cn}-key.pem")),
+        }),
+        ..l3p_net::ZenohSettings::default()
+    };
+    let mut config = settings
+        .to_zenoh_config()
+        .unwrap_or_else(|e| panic!("[zenoh.tls] for {cn}: {e}"));
+    set(&mut config, "connect/timeout_ms", "5000");
+    set(&mut config, "connect/exit_on_failure", "true");
+    zenoh::open(config)
+        .wait()
+        .unwrap_or_else(|e| panic!("open client {cn} with [zenoh.tls]: {e}"))
+}
+
 type Sub = zenoh::pubsub::Subscriber<zenoh::handlers::FifoChannelHandler<zenoh::sample::Sample>>;
 
 /// Payloads received until `expect` arrives (or `deadline` passes), plus a short grace period for
@@ -467,11 +491,13 @@ fn acl_router_enforces_writers_over_mutual_tls() {
         .port();
 
     let _router = open_router(&dir.0, port);
-    let deploy = open_client(&dir.0, port, "l3p-deploy");
+    // The deploy controller and an actor join as an l3p config makes them ([zenoh.tls]); the
+    // others through client-tls.json5. Both ways must get the same rights.
+    let deploy = open_client_with_tls_settings(&dir.0, port, "l3p-deploy");
     let bridge = open_client(&dir.0, port, "l3p-robot-bridge");
     let operator = open_client(&dir.0, port, "l3p-operator");
     let learner = open_client(&dir.0, port, "l3p-learner");
-    let actor = open_client(&dir.0, port, "l3p-actor");
+    let actor = open_client_with_tls_settings(&dir.0, port, "l3p-actor");
     let registry = open_client(&dir.0, port, "l3p-registry");
 
     let command = "l3p/robot/go1-01/command";

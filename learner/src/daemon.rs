@@ -216,6 +216,9 @@ fn load_or_init_ppo(
         Mode::Mlp | Mode::L3p => None,
         _ => opts.daemon.init_from.as_deref(),
     };
+    // Fresh weights (and any fresh transfer heads) come from the backend's RNG: seeding it makes
+    // an arm's initial policy a function of its seed, not of OS entropy.
+    device.seed(opts.ppo.seed);
     let model = crate::init_model(
         opts.ppo.mode,
         opts.policy.clone(),

@@ -1,10 +1,13 @@
-//! How every l3p process joins the Zenoh network: [`ZenohSettings`] (the `[zenoh]` config section)
-//! → [`open_session`], and the project's two publisher profiles ([`declare_control_publisher`],
-//! [`declare_rollout_publisher`]). A crate of its own so that the actor and the deploy controller
-//! speak Zenoh without linking the registry's SQLite store.
+//! How every l3p process joins the Zenoh network: [`ZenohSettings`] (the `[zenoh]` config section,
+//! with mutual TLS from [`TlsSettings`]) → [`open_session`], what a session's links expose
+//! ([`Exposure`], which `l3p deploy` checks before it will command a robot), and the project's two
+//! publisher profiles ([`declare_control_publisher`], [`declare_rollout_publisher`]). A crate of its
+//! own so that the actor and the deploy controller speak Zenoh without linking the registry's SQLite
+//! store.
 //!
 //! Architecture invariant: depends on no other project crate.
 
+use std::net::IpAddr;
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
@@ -25,6 +28,34 @@ pub struct ZenohSettings {
     pub multicast_scouting: bool,
     /// Optional Zenoh JSON5 config file loaded first (TLS, ACL, ...); the fields above override it.
     pub config_file: Option<PathBuf>,
+    /// Mutual TLS on every TLS link this process opens or accepts (`[zenoh.tls]`).
+    pub tls: Option<TlsSettings>,
+}
+
+/// Mutual TLS (`[zenoh.tls]`): the process proves its role with a certificate from the run's private
+/// CA and accepts only peers that do the same. The certificate's common name is the role the router's
+/// ACL grants (`deploy/zenoh/router-acl.json5`; how to make them: `deploy/certs/README.md`). Only
+/// `tls/<host>:<port>` endpoints use it; a `tcp/` endpoint stays plain.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TlsSettings {
+    /// The CA certificate (PEM) every peer's certificate must chain to.
+    pub ca: PathBuf,
+    /// This process's certificate (PEM), used both to connect and to listen.
+    pub cert: PathBuf,
+    /// Its private key (PEM).
+    pub key: PathBuf,
+}
+
+/// What a session's links expose, judged from its final Zenoh config ([`ZenohSettings::exposure`]).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Exposure {
+    /// Every endpoint is on this machine (loopback or a Unix socket) and nothing scouts the LAN.
+    Local,
+    /// Every endpoint that leaves this machine is TLS with mutual authentication.
+    Authenticated,
+    /// Something reaches the network without mutual TLS; the text says what.
+    Unauthenticated(String),
 }
 
 impl Default for ZenohSettings {
@@ -35,6 +66,7 @@ impl Default for ZenohSettings {
             connect: Vec::new(),
             multicast_scouting: false,
             config_file: None,
+            tls: None,
         }
     }
 }
@@ -52,6 +84,7 @@ impl ZenohSettings {
                 .collect(),
             multicast_scouting: false,
             config_file: None,
+            tls: None,
         }
     }
 
@@ -74,8 +107,103 @@ impl ZenohSettings {
             set("connect/endpoints", json(&self.connect))?;
         }
         set("scouting/multicast/enabled", json(&self.multicast_scouting))?;
+        if let Some(tls) = &self.tls {
+            // Zenoh reads these files only when a TLS link is set up, and then fails with a
+            // handshake error that does not name them: check them here.
+            let named = [("ca", &tls.ca), ("cert", &tls.cert), ("key", &tls.key)];
+            for (name, path) in named {
+                std::fs::metadata(path).map_err(|e| {
+                    NetError::Config(format!("[zenoh.tls] {name} = {}: {e}", path.display()))
+                })?;
+            }
+            let path = |p: &PathBuf| json(&p.to_string_lossy());
+            let link = "transport/link/tls";
+            set(&format!("{link}/root_ca_certificate"), path(&tls.ca))?;
+            set(&format!("{link}/enable_mtls"), "true".into())?;
+            set(&format!("{link}/verify_name_on_connect"), "true".into())?;
+            for side in ["connect", "listen"] {
+                set(&format!("{link}/{side}_certificate"), path(&tls.cert))?;
+                set(&format!("{link}/{side}_private_key"), path(&tls.key))?;
+            }
+        }
         Ok(config)
     }
+
+    /// What a session opened with these settings would expose (see [`Exposure`]), from the final
+    /// config, so that endpoints and TLS set in `config_file` count too.
+    pub fn exposure(&self) -> Result<Exposure, NetError> {
+        let config = self.to_zenoh_config()?;
+        let value = |key: &str| -> serde_json::Value {
+            config
+                .get_json(key)
+                .ok()
+                .and_then(|text| serde_json::from_str(&text).ok())
+                .unwrap_or(serde_json::Value::Null)
+        };
+        if value("scouting/multicast/enabled") == serde_json::Value::Bool(true) {
+            return Ok(Exposure::Unauthenticated(
+                "multicast scouting is on: it announces this process to the whole LAN".into(),
+            ));
+        }
+        let mutual_tls = value("transport/link/tls/enable_mtls") == serde_json::Value::Bool(true)
+            && value("transport/link/tls/root_ca_certificate").is_string();
+        let mut endpoints = Vec::new();
+        collect_strings(&value("listen/endpoints"), &mut endpoints);
+        collect_strings(&value("connect/endpoints"), &mut endpoints);
+        let mut remote = false;
+        for endpoint in &endpoints {
+            if endpoint_is_local(endpoint) {
+                continue;
+            }
+            remote = true;
+            let tls = endpoint.split('/').next() == Some("tls");
+            if !(tls && mutual_tls) {
+                let why = if tls {
+                    "TLS without client certificates (give [zenoh.tls])"
+                } else {
+                    "not TLS"
+                };
+                return Ok(Exposure::Unauthenticated(format!(
+                    "endpoint `{endpoint}` leaves this machine and is {why}"
+                )));
+            }
+        }
+        Ok(if remote {
+            Exposure::Authenticated
+        } else {
+            Exposure::Local
+        })
+    }
+}
+
+/// Every string in a config value (endpoint lists are arrays, or maps from mode to arrays).
+fn collect_strings(value: &serde_json::Value, out: &mut Vec<String>) {
+    match value {
+        serde_json::Value::String(s) => out.push(s.clone()),
+        serde_json::Value::Array(items) => items.iter().for_each(|v| collect_strings(v, out)),
+        serde_json::Value::Object(map) => map.values().for_each(|v| collect_strings(v, out)),
+        _ => {}
+    }
+}
+
+/// `true` for an endpoint that cannot leave this machine: a Unix socket, or a loopback address
+/// (`tcp/127.0.0.1:7447`, `tls/[::1]:7447`, `tcp/localhost:7447`). `0.0.0.0` and `[::]` listen on
+/// every interface, so they are not local.
+pub fn endpoint_is_local(endpoint: &str) -> bool {
+    let Some((protocol, rest)) = endpoint.split_once('/') else {
+        return false;
+    };
+    if protocol.starts_with("unixsock") || protocol == "unixpipe" {
+        return true;
+    }
+    // Zenoh endpoints may carry `?metadata` and `#config` after the address.
+    let address = rest.split(['?', '#']).next().unwrap_or_default();
+    let host = match address.strip_prefix('[') {
+        Some(bracketed) => bracketed.split(']').next().unwrap_or_default(),
+        None => address.rsplit_once(':').map_or(address, |(host, _)| host),
+    };
+    host.eq_ignore_ascii_case("localhost")
+        || host.parse::<IpAddr>().is_ok_and(|ip| ip.is_loopback())
 }
 
 /// JSON text of a config value (strings quoted, lists as arrays).
@@ -166,6 +294,160 @@ mod tests {
         assert!(!listen.contains("tcp"), "{listen}");
         let scouting = config.get_json("scouting/multicast/enabled").unwrap();
         assert_eq!(scouting, "false");
+    }
+
+    #[test]
+    fn endpoints_on_this_machine_are_local() {
+        for local in [
+            "tcp/127.0.0.1:7447",
+            "tcp/127.8.9.1:7447",
+            "tls/[::1]:7447",
+            "tcp/localhost:7447",
+            "tcp/LOCALHOST:7447#rel=1",
+            "tcp/127.0.0.1:7447?iface=lo",
+            "unixsock-stream//tmp/l3p.sock",
+        ] {
+            assert!(endpoint_is_local(local), "{local}");
+        }
+        for remote in [
+            "tcp/0.0.0.0:7447",
+            "tcp/[::]:7447",
+            "tcp/192.0.2.7:7447",
+            "tls/router.example.com:7447",
+            "udp/10.0.0.1:7447",
+            "tcp/localhost.example.com:7447",
+            "garbage",
+        ] {
+            assert!(!endpoint_is_local(remote), "{remote}");
+        }
+    }
+
+    fn exposure(settings: &ZenohSettings) -> Exposure {
+        settings.exposure().unwrap()
+    }
+
+    /// Three empty files standing in for the CA, certificate and key (Zenoh reads them only when
+    /// a TLS link is set up).
+    fn tls_files(dir: &std::path::Path) -> TlsSettings {
+        let file = |name: &str| {
+            let path = dir.join(name);
+            std::fs::write(&path, "").unwrap();
+            path
+        };
+        TlsSettings {
+            ca: file("ca.pem"),
+            cert: file("deploy.pem"),
+            key: file("deploy-key.pem"),
+        }
+    }
+
+    #[test]
+    fn exposure_tells_local_authenticated_and_open_links_apart() {
+        assert_eq!(exposure(&ZenohSettings::default()), Exposure::Local);
+        assert_eq!(
+            exposure(&ZenohSettings::loopback(None, &[7447])),
+            Exposure::Local
+        );
+        let open = |listen: &[&str], connect: &[&str]| ZenohSettings {
+            listen: listen.iter().map(|s| s.to_string()).collect(),
+            connect: connect.iter().map(|s| s.to_string()).collect(),
+            ..ZenohSettings::default()
+        };
+        let Exposure::Unauthenticated(why) = exposure(&open(&[], &["tcp/192.0.2.7:7447"])) else {
+            panic!("a plain TCP link off the machine is unauthenticated");
+        };
+        assert!(
+            why.contains("tcp/192.0.2.7:7447") && why.contains("not TLS"),
+            "{why}"
+        );
+        assert!(matches!(
+            exposure(&open(&["tcp/0.0.0.0:7447"], &[])),
+            Exposure::Unauthenticated(_)
+        ));
+        let Exposure::Unauthenticated(why) = exposure(&open(&[], &["tls/router.example.com:7447"]))
+        else {
+            panic!("TLS without client certificates proves nobody's role");
+        };
+        assert!(why.contains("[zenoh.tls]"), "{why}");
+        let scouting = ZenohSettings {
+            multicast_scouting: true,
+            ..ZenohSettings::default()
+        };
+        let Exposure::Unauthenticated(why) = exposure(&scouting) else {
+            panic!("multicast scouting announces the process to the LAN");
+        };
+        assert!(why.contains("multicast"), "{why}");
+
+        let dir = tempfile::tempdir().unwrap();
+        let tls = ZenohSettings {
+            tls: Some(tls_files(dir.path())),
+            ..open(&["tcp/127.0.0.1:7449"], &["tls/router.example.com:7447"])
+        };
+        assert_eq!(exposure(&tls), Exposure::Authenticated);
+        // One plain link off the machine is enough to be open, certificates or not.
+        let mixed = ZenohSettings {
+            connect: vec![
+                "tls/router.example.com:7447".into(),
+                "tcp/192.0.2.7:7447".into(),
+            ],
+            ..tls.clone()
+        };
+        assert!(matches!(exposure(&mixed), Exposure::Unauthenticated(_)));
+    }
+
+    #[test]
+    fn tls_settings_become_zenoh_mutual_tls_and_missing_files_are_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let tls = tls_files(dir.path());
+        let settings = ZenohSettings {
+            connect: vec!["tls/router.example.com:7447".into()],
+            tls: Some(tls.clone()),
+            ..ZenohSettings::default()
+        };
+        let config = settings.to_zenoh_config().unwrap();
+        let get = |key: &str| {
+            config
+                .get_json(&format!("transport/link/tls/{key}"))
+                .unwrap()
+        };
+        assert_eq!(get("enable_mtls"), "true");
+        assert_eq!(get("verify_name_on_connect"), "true");
+        assert!(get("root_ca_certificate").contains("ca.pem"));
+        for side in ["connect", "listen"] {
+            assert!(get(&format!("{side}_certificate")).contains("deploy.pem"));
+            assert!(get(&format!("{side}_private_key")).contains("deploy-key.pem"));
+        }
+        let missing = ZenohSettings {
+            tls: Some(TlsSettings {
+                key: dir.path().join("nope-key.pem"),
+                ..tls
+            }),
+            ..settings
+        };
+        let err = missing.to_zenoh_config().unwrap_err().to_string();
+        assert!(
+            err.contains("[zenoh.tls] key") && err.contains("nope-key.pem"),
+            "{err}"
+        );
+    }
+
+    /// TLS set up in a Zenoh config file counts as much as `[zenoh.tls]`.
+    #[test]
+    fn exposure_reads_tls_from_the_config_file() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("client.json5");
+        std::fs::write(
+            &file,
+            r#"{ transport: { link: { tls: { root_ca_certificate: "/etc/l3p/certs/ca.pem",
+                 enable_mtls: true } } } }"#,
+        )
+        .unwrap();
+        let settings = ZenohSettings {
+            connect: vec!["tls/router.example.com:7447".into()],
+            config_file: Some(file),
+            ..ZenohSettings::default()
+        };
+        assert_eq!(exposure(&settings), Exposure::Authenticated);
     }
 
     /// A connect-only session (what actors and one-shot commands open) listens on no port.

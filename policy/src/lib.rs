@@ -20,21 +20,23 @@
 //! Architecture invariant: no zenoh, no rapier; this crate knows robots only as [`RobotSpec`]s.
 
 pub mod checkpoint;
-pub mod config;
 pub mod diffusion;
-pub mod infer;
 pub mod model;
 pub mod nets;
+
+// The burn-free half (description, export format, pure-Rust inference, errors) lives in
+// `l3p-infer`, so that the deploy controller does not link burn; re-exported whole.
+pub use l3p_infer::{PolicyError, config, export as infer};
 
 pub use checkpoint::{
     Checkpoint, CheckpointHeader, checkpoint_from_bytes, checkpoint_to_bytes, core_sha256,
     export_bytes, export_to_dir, is_checkpoint, load_checkpoint, save_checkpoint, write_atomic,
 };
-pub use config::{
+pub use diffusion::{DdpmSchedule, ObsDiffusion, ObsDiffusionConfig};
+pub use l3p_infer::{
     Arch, IO_VERSION, ObsSegment, PolicyConfig, RecoveryConfig, RobotIo, RobotSpec, mlp_params,
 };
-pub use diffusion::{DdpmSchedule, ObsDiffusion, ObsDiffusionConfig};
-pub use infer::{
+pub use l3p_infer::{
     DeployPolicy, EXPORT_FORMAT, ExportConfig, ExportLayer, InferScratch, replace_export_config,
 };
 pub use model::{ActorOut, PolicyModel, PolicyNet, RobotHeads, tensor_to_vec};
@@ -43,42 +45,6 @@ pub use nets::{Mlp, MlpConfig, elu};
 pub use burn;
 
 use burn::tensor::{Device, Tensor};
-
-/// Errors of this crate.
-#[derive(Debug, thiserror::Error)]
-pub enum PolicyError {
-    #[error("invalid policy config: {0}")]
-    Config(String),
-    #[error("unknown robot {robot} (model has: {known})")]
-    UnknownRobot { robot: String, known: String },
-    #[error("shape mismatch: {0}")]
-    Shape(String),
-    #[error("cannot read or write {path}: {source}")]
-    Io {
-        path: String,
-        #[source]
-        source: std::io::Error,
-    },
-    #[error("bad checkpoint: {0}")]
-    Checkpoint(String),
-    #[error("bad policy export: {0}")]
-    Export(String),
-    #[error("{path}: {inner}")]
-    InFile {
-        path: String,
-        inner: Box<PolicyError>,
-    },
-}
-
-impl PolicyError {
-    /// Attach the file this error came from.
-    pub fn in_file(self, path: &std::path::Path) -> Self {
-        PolicyError::InFile {
-            path: path.display().to_string(),
-            inner: Box::new(self),
-        }
-    }
-}
 
 /// The CPU inference device (`flex`, pure-Rust; chosen by measurement, see `learner/NOTES.md`).
 pub fn cpu_device() -> Device {

@@ -367,5 +367,9 @@ pub struct DeployStatus {
     /// Policy inference (observation → action) latency, microseconds: median and 99th percentile.
     pub inference_p50_us: f64,
     pub inference_p99_us: f64,
+    /// Set while the controller runs over links that anyone on the network can use (`l3p deploy
+    /// --insecure`), saying which; absent otherwise, and in statuses of older controllers.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub warning: Option<String>,
 }
 wire_message!(DeployStatus, "deploy status");

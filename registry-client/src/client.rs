@@ -218,12 +218,17 @@ impl RegistryClient {
         };
         // Reference-counted: a retry does not copy a blob.
         let (payload, attachment) = (ZBytes::from(payload), attachment.map(ZBytes::from));
-        let deadline = Instant::now() + timeout;
+        let started = Instant::now();
+        let deadline = started + timeout;
+        let no_reply = |key: String| RegistryError::NoReply {
+            key,
+            waited: started.elapsed(),
+        };
         let mut pause = Duration::from_millis(20);
         let reply = loop {
             let remaining = deadline.saturating_duration_since(Instant::now());
             if remaining.is_zero() {
-                return Err(RegistryError::NoReply { key, timeout });
+                return Err(no_reply(key));
             }
             let get = self
                 .session
@@ -239,7 +244,7 @@ impl RegistryClient {
                 break reply;
             }
             if Instant::now() >= self.discovery_until {
-                return Err(RegistryError::NoReply { key, timeout });
+                return Err(no_reply(key));
             }
             let remaining = deadline
                 .min(self.discovery_until)
@@ -263,7 +268,7 @@ impl RegistryClient {
                     Err(_) => {
                         let text = String::from_utf8_lossy(&bytes).into_owned();
                         if text.eq_ignore_ascii_case("timeout") {
-                            Err(RegistryError::NoReply { key, timeout })
+                            Err(no_reply(key))
                         } else {
                             Err(RegistryError::Remote {
                                 code: ErrorCode::Internal,

@@ -64,9 +64,14 @@ pub enum RegistryError {
     #[error("zenoh error on {key}: {message}")]
     Zenoh { key: String, message: String },
     #[error(
-        "no registry answered on {key} within {timeout:?}\nhint: start `l3p registry serve` and check the --connect endpoint"
+        "no registry answered on {key} (gave up after {waited:.1?})\nhint: start `l3p registry serve` and check the --connect endpoint"
     )]
-    NoReply { key: String, timeout: Duration },
+    NoReply {
+        key: String,
+        /// How long the query was tried: its timeout, or less when no registry was reachable at
+        /// all after the discovery window (then it fails at once).
+        waited: Duration,
+    },
     #[error("registry service replied with an error ({code}): {message}")]
     Remote { code: ErrorCode, message: String },
     #[error("malformed reply on {key}: {message}")]

@@ -7,6 +7,8 @@
 //!   such as `prod`) with their full history, and lineage (which core an adapter was trained against,
 //!   which core a transfer run froze, which checkpoint a version came from).
 //! - [`StoreError`] (module `error`): the database's own failures around a [`RegistryError`].
+//! - [`RegistryAccess`] (module `access`): the same API over the store or a service, for tools that
+//!   work either way.
 //! - [`serve`] / [`serve_with`] (module `service`): the queryable on `l3p/registry/**` answering JSON
 //!   requests with JSON metadata or raw blobs; protocol in `NOTES.md`.
 //! - Re-exported from `l3p-registry-client`: [`RegistryClient`], the async client mirroring
@@ -16,10 +18,12 @@
 //! Wire types ([`ArtifactMeta`], [`ArtifactSpec`], [`ArtifactKind`], ...) live in
 //! [`l3p_proto::registry`] and are re-exported here.
 
+mod access;
 mod error;
 mod service;
 mod store;
 
+pub use access::RegistryAccess;
 pub use error::StoreError;
 pub use l3p_registry_client::{
     AliasEvent, ArtifactKind, ArtifactMeta, ArtifactRef, ArtifactSpec, CoreCheck, ErrorCode,

@@ -32,7 +32,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::RwLock;
 
-use rapier3d::math::Vec3;
+use crate::math::Vec3;
 use serde::{Deserialize, Serialize};
 
 use crate::bench::stand_check;

@@ -305,6 +305,28 @@ pub struct UnknownRobot {
     pub known: String,
 }
 
+/// A robot added in this process (`crate::added`); added robots need the simulator (feature `sim`)
+/// to be described, so a build without it knows the catalog only.
+#[cfg(feature = "sim")]
+fn added_robot(key: &str) -> Option<&'static RobotSpec> {
+    crate::added::find(key)
+}
+
+#[cfg(not(feature = "sim"))]
+fn added_robot(_key: &str) -> Option<&'static RobotSpec> {
+    None
+}
+
+#[cfg(feature = "sim")]
+fn added_robots() -> Vec<&'static RobotSpec> {
+    crate::added::all_added()
+}
+
+#[cfg(not(feature = "sim"))]
+fn added_robots() -> Vec<&'static RobotSpec> {
+    Vec::new()
+}
+
 impl RobotSpec {
     /// All built-in robots.
     pub fn all() -> &'static [RobotSpec] {
@@ -318,13 +340,13 @@ impl RobotSpec {
         Self::all()
             .iter()
             .find(|r| r.name == key)
-            .or_else(|| crate::added::find(&key))
+            .or_else(|| added_robot(&key))
             .ok_or_else(|| UnknownRobot {
                 name: name.to_string(),
                 known: Self::all()
                     .iter()
                     .map(|r| r.name)
-                    .chain(crate::added::all_added().iter().map(|r| r.name))
+                    .chain(added_robots().iter().map(|r| r.name))
                     .collect::<Vec<_>>()
                     .join(", "),
             })

@@ -31,7 +31,7 @@
 
 use std::fmt;
 
-use rapier3d::math::{Pose, Vec3};
+use crate::math::{Pose, Vec3};
 
 use crate::model::{JointKind, RobotModel};
 

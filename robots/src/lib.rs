@@ -32,19 +32,34 @@
 //! - [`bench::run_sim_bench`], [`bench::stand_check`]: the work behind `l3p bench sim` and
 //!   `l3p robots check`.
 //!
+//! - [`io::robot_io`] and [`io::ObservationBuilder`]: the policy's robot I/O contract
+//!   ([`l3p_infer::RobotIo`]) and a wire robot state turned into the observation exactly as
+//!   [`task::Task::observe`] makes it (a test compares the two), for exports and the deploy controller.
+//!
+//! Without the default feature `sim` the crate has no rapier: catalog, models, task, terrain, gait
+//! metrics and `io` remain; `sim`, `vecenv`, `bench` and `added` need it.
+//!
 //! Architecture invariant: this crate knows nothing of burn, Zenoh or tokio.
 
 pub mod actuator;
-pub mod added;
-pub mod bench;
 pub mod catalog;
 pub mod config;
 pub mod gait;
 pub mod infer;
+pub mod io;
+pub mod math;
 pub mod mirror;
 pub mod model;
-pub mod sim;
 pub mod task;
 pub mod terrain;
 pub mod urdf;
+
+// The simulator and what needs it (feature `sim`, on by default).
+#[cfg(feature = "sim")]
+pub mod added;
+#[cfg(feature = "sim")]
+pub mod bench;
+#[cfg(feature = "sim")]
+pub mod sim;
+#[cfg(feature = "sim")]
 pub mod vecenv;

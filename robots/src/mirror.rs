@@ -14,10 +14,10 @@
 //! `[sin, cos] → [−sin, −cos]`. The height scan's rows (y) reverse.
 
 use crate::config::{GAIT_CLOCK_OBS, HEIGHT_SCAN_OBS, PROPRIO_OBS};
+use crate::math::Vec3;
 use crate::model::RobotModel;
 use crate::task::NUM_JOINTS;
 use crate::terrain::{SCAN_NX, SCAN_NY};
-use rapier3d::math::Vec3;
 
 /// A permutation with signs: `out[i] = sign[i] · in[index[i]]`.
 #[derive(Debug, Clone, PartialEq)]

@@ -5,8 +5,8 @@
 //! Frames follow URDF: a body's frame is the frame of its first (movable) link, which coincides with
 //! its joint frame at zero joint angle. Math is `f32` glam (the types rapier uses).
 
-pub use rapier3d::math::Pose;
-use rapier3d::math::{Mat3, Rot3, Vec3};
+pub use crate::math::Pose;
+use crate::math::{Mat3, Rot3, Vec3};
 
 /// A primitive collision shape, in the body frame given by [`ColliderSpec::pose`].
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -18,7 +18,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
-use rapier3d::math::{Mat3, Pose, Rot3, Vec3};
+use crate::math::{Mat3, Pose, Rot3, Vec3};
 use xml::common::Position;
 use xml::reader::{EventReader, ParserConfig, XmlEvent};
 use xml::writer::EmitterConfig;

@@ -71,9 +71,17 @@ fn rough_env_with_random_and_nan_actions_never_panics() {
     }
     // Random actions make robots fall: episodes end and are reported.
     assert!(episodes > 0);
+    // Every stage is timed (no comparison of durations: that would depend on the machine's load).
     let t = env.timings();
     assert_eq!(t.steps, 300);
-    assert!(t.physics > t.rewards);
+    for (stage, time) in [
+        ("physics", t.physics),
+        ("observations", t.observations),
+        ("rewards", t.rewards),
+        ("total", t.total),
+    ] {
+        assert!(time > std::time::Duration::ZERO, "{stage} was not timed");
+    }
 }
 
 #[test]

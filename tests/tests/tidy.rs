@@ -2,7 +2,8 @@
 //! project crates depend on each other only along the allowed graph below (ARCHITECTURE.md
 //! "Dependency graph" shows the same list), every normal dependency is used by its crate's sources,
 //! so an unused one (compile time on two cores) cannot creep back, and the crates that reach the
-//! registry only over Zenoh do not link SQLite through another project crate.
+//! registry only over Zenoh do not link SQLite through another project crate, and the deploy
+//! controller links neither the simulator nor the training stack.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -11,8 +12,9 @@ use std::path::{Path, PathBuf};
 const ALLOWED: &[(&str, &[&str])] = &[
     ("l3p-proto", &[]),
     ("l3p-net", &[]),
-    ("l3p-robots", &[]),
-    ("l3p-policy", &[]),
+    ("l3p-infer", &[]),
+    ("l3p-robots", &["l3p-infer"]),
+    ("l3p-policy", &["l3p-infer"]),
     ("l3p-registry-client", &["l3p-proto"]),
     ("l3p-registry", &["l3p-proto", "l3p-registry-client"]),
     (
@@ -21,14 +23,20 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ),
     (
         "l3p-actor",
-        &["l3p-proto", "l3p-net", "l3p-policy", "l3p-robots"],
+        &[
+            "l3p-proto",
+            "l3p-net",
+            "l3p-infer",
+            "l3p-robots",
+            "l3p-deploy",
+        ],
     ),
     (
         "l3p-deploy",
         &[
             "l3p-proto",
             "l3p-net",
-            "l3p-policy",
+            "l3p-infer",
             "l3p-robots",
             "l3p-registry-client",
         ],
@@ -222,5 +230,164 @@ fn zenoh_only_registry_users_do_not_link_sqlite() {
     assert!(
         offenders.is_empty(),
         "{offenders:#?}\nhint: depend on l3p-registry-client (the Zenoh client), not l3p-registry"
+    );
+}
+
+/// One `[dependencies]` entry with what decides whether and how it is linked.
+struct DepSpec {
+    name: String,
+    optional: bool,
+    default_features: bool,
+    features: Vec<String>,
+}
+
+/// A crate's `[dependencies]`, `workspace = true` entries resolved against the workspace's table
+/// (a member can add features to an inherited dependency, not turn its default features back on).
+fn dependency_specs(manifest_dir: &Path) -> (Vec<DepSpec>, toml::Table) {
+    let workspace: toml::Table = std::fs::read_to_string(root().join("Cargo.toml"))
+        .unwrap()
+        .parse()
+        .unwrap();
+    let inherited = workspace["workspace"]["dependencies"]
+        .as_table()
+        .unwrap()
+        .clone();
+    let manifest: toml::Table = std::fs::read_to_string(manifest_dir.join("Cargo.toml"))
+        .unwrap()
+        .parse()
+        .unwrap();
+    let strings = |v: Option<&toml::Value>| -> Vec<String> {
+        v.and_then(|v| v.as_array())
+            .map(|a| {
+                a.iter()
+                    .filter_map(|s| s.as_str().map(str::to_string))
+                    .collect()
+            })
+            .unwrap_or_default()
+    };
+    let specs = manifest
+        .get("dependencies")
+        .and_then(|d| d.as_table())
+        .map(|table| {
+            table
+                .iter()
+                .map(|(name, entry)| {
+                    let entry = entry.as_table().cloned().unwrap_or_default();
+                    let base = if entry.get("workspace").and_then(|w| w.as_bool()) == Some(true) {
+                        inherited
+                            .get(name)
+                            .and_then(|v| v.as_table())
+                            .cloned()
+                            .unwrap_or_default()
+                    } else {
+                        entry.clone()
+                    };
+                    let mut features = strings(base.get("features"));
+                    features.extend(strings(entry.get("features")));
+                    DepSpec {
+                        name: name.clone(),
+                        optional: entry.get("optional").and_then(|o| o.as_bool()) == Some(true),
+                        default_features: base
+                            .get("default-features")
+                            .and_then(|d| d.as_bool())
+                            .unwrap_or(true),
+                        features,
+                    }
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    (specs, manifest)
+}
+
+/// `requested` features of a crate closed over its `[features]` table (items such as `dep:x` and
+/// other features' names included).
+fn features_on(manifest: &toml::Table, requested: &BTreeSet<String>) -> BTreeSet<String> {
+    let table = manifest
+        .get("features")
+        .and_then(|f| f.as_table())
+        .cloned()
+        .unwrap_or_default();
+    let mut on = requested.clone();
+    let mut stack: Vec<String> = on.iter().cloned().collect();
+    while let Some(feature) = stack.pop() {
+        let items = table.get(&feature).and_then(|v| v.as_array());
+        for item in items.into_iter().flatten().filter_map(|i| i.as_str()) {
+            if on.insert(item.to_string()) {
+                stack.push(item.to_string());
+            }
+        }
+    }
+    on
+}
+
+/// `true` when `dep` is linked with these features on.
+fn is_linked(dep: &DepSpec, on: &BTreeSet<String>) -> bool {
+    !dep.optional || on.contains(&format!("dep:{}", dep.name))
+}
+
+/// Every package `start` links through project crates, with each project crate's features resolved
+/// as cargo does for a build of `start` alone (the features every edge asks for, unified).
+fn linked_packages(start: &str) -> BTreeSet<String> {
+    let members = members();
+    let dir_of: BTreeMap<&str, &Path> = members
+        .iter()
+        .map(|m| (m.name.as_str(), m.dir.as_path()))
+        .collect();
+    // Project crate → the features asked of it ("default" while its default features are on).
+    let mut requested: BTreeMap<String, BTreeSet<String>> =
+        BTreeMap::from([(start.to_string(), BTreeSet::from(["default".to_string()]))]);
+    let mut grew = true;
+    while grew {
+        grew = false;
+        for (krate, features) in requested.clone() {
+            let (specs, manifest) = dependency_specs(dir_of[krate.as_str()]);
+            let on = features_on(&manifest, &features);
+            let project_deps = specs
+                .iter()
+                .filter(|d| dir_of.contains_key(d.name.as_str()));
+            for dep in project_deps.filter(|d| is_linked(d, &on)) {
+                let mut wanted: BTreeSet<String> = dep.features.iter().cloned().collect();
+                if dep.default_features {
+                    wanted.insert("default".into());
+                }
+                let entry = requested.entry(dep.name.clone()).or_default();
+                let before = entry.len();
+                entry.extend(wanted);
+                grew |= entry.len() != before;
+            }
+        }
+    }
+    let mut linked = BTreeSet::new();
+    for (krate, features) in &requested {
+        let (specs, manifest) = dependency_specs(dir_of[krate.as_str()]);
+        let on = features_on(&manifest, features);
+        linked.insert(krate.clone());
+        linked.extend(
+            specs
+                .iter()
+                .filter(|d| is_linked(d, &on))
+                .map(|d| d.name.clone()),
+        );
+    }
+    linked
+}
+
+#[test]
+fn the_deploy_controller_links_no_simulator_and_no_training_stack() {
+    // The walk finds the simulator and burn where they are.
+    let cli = linked_packages("l3p-cli");
+    assert!(cli.contains("rapier3d") && cli.contains("burn"), "{cli:?}");
+    let actor = linked_packages("l3p-actor");
+    assert!(actor.contains("rapier3d"), "the actor simulates: {actor:?}");
+    let deploy = linked_packages("l3p-deploy");
+    let offenders: Vec<&str> = ["rapier3d", "burn", "rusqlite", "l3p-policy", "l3p-registry"]
+        .into_iter()
+        .filter(|p| deploy.contains(*p))
+        .collect();
+    assert!(
+        offenders.is_empty(),
+        "l3p-deploy links {offenders:?} (through {deploy:?})\nhint: depend on l3p-infer (not \
+         l3p-policy), on l3p-robots without its `sim` feature, and on l3p-registry-client"
     );
 }

@@ -9,21 +9,20 @@
 
 use std::time::{Duration, Instant};
 
+use l3p_deploy::DeployError;
+use l3p_deploy::controller::tilt_degrees;
+use l3p_deploy::latest::{LatestSlot, now_unix_ns};
+use l3p_deploy::pacer::Pacer;
 use l3p_proto::{ControlMode, RobotCommand, RobotState, WIRE_VERSION, codec, keys};
 use l3p_robots::actuator::Actuator;
 use l3p_robots::catalog::{Gains, NUM_JOINTS, RobotSpec};
+use l3p_robots::math::{Pose, Vec3};
 use l3p_robots::sim::{RobotBinding, SimConfig, SimWorld};
 use l3p_robots::task::SimState;
-use rapier3d::math::{Pose, Vec3};
 use serde::{Deserialize, Serialize};
 use tokio_util::sync::CancellationToken;
 use tracing::{info, warn};
 use zenoh::Wait;
-
-use crate::DeployError;
-use crate::controller::tilt_degrees;
-use crate::latest::{LatestSlot, now_unix_ns};
-use crate::pacer::Pacer;
 
 #[derive(Debug, Clone)]
 pub struct SimRobotOptions {

@@ -1,5 +1,5 @@
 //! Pure-Rust inference of an exported policy (no burn): [`DeployPolicy`] loads the
-//! safetensors + JSON export written by [`crate::checkpoint`] and computes action means (and samples
+//! safetensors + JSON export written by `l3p_policy::checkpoint` and computes action means (and samples
 //! Gaussian actions with their log-probs) for a batch of observations. Used by the deploy controller
 //! and, where it is faster than burn, by actors.
 //!
@@ -373,9 +373,7 @@ pub fn read_export_json(dir: &Path) -> Result<ExportConfig, PolicyError> {
 }
 
 /// Metadata map holding the config, for writing.
-pub(crate) fn export_metadata(
-    config: &ExportConfig,
-) -> Result<HashMap<String, String>, PolicyError> {
+pub fn export_metadata(config: &ExportConfig) -> Result<HashMap<String, String>, PolicyError> {
     let json = serde_json::to_string(config).map_err(|e| PolicyError::Export(e.to_string()))?;
     Ok(HashMap::from([(EXPORT_METADATA_KEY.to_string(), json)]))
 }
