@@ -406,11 +406,6 @@ pub async fn run(
         }
     };
     let run = opts.run.clone();
-    let dims: HashMap<String, (usize, usize)> = opts
-        .robots
-        .iter()
-        .map(|r| (r.name.clone(), (r.obs_dim, r.action_dim)))
-        .collect();
 
     let registry = opts
         .use_registry
@@ -426,130 +421,16 @@ pub async fn run(
     let uploader = registry.map(RegistryUploader::spawn);
     let published = Arc::new(RwLock::new(Published::default()));
     let mut weights = publish_weights(&ppo, &run, &opts.robots, &published)?;
-
-    // Weights queryable: answers `l3p/<run>/policy/weights/<robot>/<version>`.
-    let queryable = session
-        .declare_queryable(keys::policy_weights_all(&run))
-        .await
-        .map_err(zerr)?;
-    let serve_published = published.clone();
-    let serve_cancel = cancel.clone();
-    let serve_run = run.clone();
-    let serve = tokio::spawn(async move {
-        loop {
-            let query = tokio::select! {
-                _ = serve_cancel.cancelled() => break,
-                q = queryable.recv_async() => match q { Ok(q) => q, Err(_) => break },
-            };
-            let key = query.key_expr().as_str().to_string();
-            let reply = {
-                let p = serve_published.read().ok();
-                let parsed = key.rsplitn(3, '/').collect::<Vec<_>>();
-                match (p, parsed.as_slice()) {
-                    (Some(p), [version, robot, _]) => match version.parse::<u64>() {
-                        Ok(v) if v == p.version => p
-                            .blobs
-                            .get(*robot)
-                            .cloned()
-                            .ok_or_else(|| format!("unknown robot {robot} in run {serve_run}")),
-                        Ok(v) => Err(format!(
-                            "policy version {v} is not served (current {})",
-                            p.version
-                        )),
-                        Err(_) => Err(format!("bad weights key {key}")),
-                    },
-                    _ => Err(format!("bad weights key {key}")),
-                }
-            };
-            let sent = match reply {
-                Ok(bytes) => query.reply(key.clone(), bytes).await,
-                Err(message) => query.reply_err(message.into_bytes()).await,
-            };
-            if let Err(e) = sent {
-                warn!("cannot answer weights query {key}: {e}");
-            }
-        }
-    });
+    let serve = spawn_weights_server(&session, &run, published.clone(), cancel.clone()).await?;
 
     // Events: rollout chunks and actor liveliness, funnelled into one bounded channel. When the loop
     // is busy updating, the channel fills and Zenoh's Block congestion control pushes back on actors.
     let (tx, mut events) = mpsc::channel::<Event>(256);
-    let rollouts = session
-        .declare_subscriber(keys::rollout_all(&run))
-        .await
-        .map_err(zerr)?;
-    let chunk_tx = tx.clone();
-    let chunk_dims = dims.clone();
-    let chunk_run = run.clone();
-    let (chunk_steps, chunk_obs_clip) = (opts.steps_per_env, opts.obs_clip);
     let decode_seconds = Arc::new(std::sync::Mutex::new(0f64));
-    let decode_acc = decode_seconds.clone();
-    let chunk_task = tokio::spawn(async move {
-        while let Ok(sample) = rollouts.recv_async().await {
-            let start = Instant::now();
-            let bytes = sample.payload().to_bytes();
-            let event = match codec::decode::<RolloutChunk>(&bytes) {
-                Err(e) => {
-                    warn!(key = %sample.key_expr(), "rejected chunk: {e}");
-                    Event::Rejected
-                }
-                Ok(chunk) => {
-                    let checked = match chunk_dims.get(&chunk.robot) {
-                        None => Err(format!(
-                            "unknown robot {} (run trains {:?})",
-                            chunk.robot,
-                            chunk_dims.keys()
-                        )),
-                        Some(_) if chunk.run != chunk_run => {
-                            Err(format!("chunk of run {}", chunk.run))
-                        }
-                        Some(&(obs, act)) => chunk
-                            .validate_contract(obs, act, chunk_steps, chunk_obs_clip)
-                            .map_err(|e| e.to_string()),
-                    };
-                    match checked {
-                        Ok(()) => Event::Chunk(Box::new(chunk)),
-                        Err(e) => {
-                            warn!(key = %sample.key_expr(), actor = %chunk.actor_id, "rejected chunk: {e}");
-                            Event::Rejected
-                        }
-                    }
-                }
-            };
-            if let Ok(mut acc) = decode_acc.lock() {
-                *acc += start.elapsed().as_secs_f64();
-            }
-            if chunk_tx.send(event).await.is_err() {
-                break;
-            }
-        }
-    });
-    let liveliness = session
-        .liveliness()
-        .declare_subscriber(keys::actors_all(&run))
-        .history(true)
-        .await
-        .map_err(zerr)?;
-    let live_tx = tx.clone();
-    let live_run = run.clone();
-    let live_task = tokio::spawn(async move {
-        while let Ok(sample) = liveliness.recv_async().await {
-            let Some((robot, actor)) =
-                keys::parse_actor_liveliness(&live_run, sample.key_expr().as_str())
-            else {
-                continue;
-            };
-            let id = format!("{robot}/{actor}");
-            let event = match sample.kind() {
-                SampleKind::Put => Event::ActorUp(id),
-                SampleKind::Delete => Event::ActorDown(id),
-            };
-            if live_tx.send(event).await.is_err() {
-                break;
-            }
-        }
-    });
-    drop(tx);
+    let contract = ChunkContract::of(&opts);
+    let chunk_task =
+        spawn_chunk_intake(&session, contract, tx.clone(), decode_seconds.clone()).await?;
+    let live_task = spawn_liveliness_watch(&session, &run, tx).await?;
 
     let announce_key = keys::policy_announce(&run);
     // Seconds on this process's monotonic clock, for the gather rule.
@@ -562,9 +443,7 @@ pub async fn run(
         now_s(),
     );
     let mut rejected = 0u64;
-    let mut weights_seconds = 0f64;
-    let mut last_checkpoint = ppo.iteration();
-    let mut last_registry_checkpoint = ppo.iteration();
+    let mut checkpoints = CheckpointSchedule::new(&opts.daemon, ppo.iteration());
     let max_iterations = opts.daemon.max_iterations;
     let mut tick = tokio::time::interval(Duration::from_millis(500));
     let incarnation = unix_ms();
@@ -628,14 +507,6 @@ pub async fn run(
         }
 
         // Update on a blocking thread; the subscription tasks keep buffering meanwhile.
-        let actor_transport = chunks
-            .iter()
-            .map(|c| c.transport_seconds as f64)
-            .fold(0.0, f64::max);
-        let collect_seconds = chunks
-            .iter()
-            .map(|c| c.collect_seconds as f64)
-            .fold(0.0, f64::max);
         let iteration_start = Instant::now();
         let (returned, result) = tokio::task::spawn_blocking(move || {
             let result =
@@ -651,7 +522,7 @@ pub async fn run(
         };
         let w_start = Instant::now();
         weights = publish_weights(&ppo, &run, &opts.robots, &published)?;
-        weights_seconds += w_start.elapsed().as_secs_f64();
+        let weights_seconds = w_start.elapsed().as_secs_f64();
         let new_version = ppo.iteration();
         let json = codec::encode_json(&announce(new_version, &weights)).map_err(zerr)?;
         if let Err(e) = session.put(&announce_key, json).await {
@@ -667,47 +538,25 @@ pub async fn run(
             .lock()
             .map(|mut d| std::mem::take(&mut *d))
             .unwrap_or(0.0);
-        let mut record = MetricsRecord::new(&run, "learner", new_version, unix_ms());
-        update_metrics(&mut record, &update);
-        record.insert_episode_means(chunks.iter().flat_map(|c| c.episodes.iter()));
-        // The slowest actor's split of its collection time, per stage.
-        let mut stages: std::collections::BTreeMap<&str, f32> = Default::default();
-        for c in &chunks {
-            for (name, s) in &c.stage_seconds {
-                let slot = stages.entry(name.as_str()).or_default();
-                *slot = slot.max(*s);
-            }
-        }
-        for (name, s) in stages {
-            record.insert(&format!("time/{name}_seconds"), s as f64);
-        }
-        record.insert_reward_term_means(
-            chunks
-                .iter()
-                .map(|c| (c.reward_terms.as_slice(), c.episodes.as_slice())),
+        let counters = LoopCounters {
+            actors: gather.live(),
+            dropped_chunks: gather.dropped(),
+            rejected_chunks: rejected,
+            silent_actors: gather.silent(),
+            registry: uploader.as_ref().map(|u| {
+                let stats = u.stats();
+                [stats.backlog(), stats.failed_attempts(), stats.dropped()]
+            }),
+        };
+        let record = iteration_record(
+            &run,
+            new_version,
+            &update,
+            &chunks,
+            iteration_seconds,
+            decode + weights_seconds,
+            &counters,
         );
-        record.insert("iteration_seconds", iteration_seconds);
-        record.insert("collect_seconds", collect_seconds);
-        record.insert(
-            "samples_per_second",
-            update.samples as f64 / iteration_seconds.max(1e-9),
-        );
-        record.insert("actors", gather.live() as f64);
-        record.insert("dropped_chunks", gather.dropped() as f64);
-        record.insert("rejected_chunks", rejected as f64);
-        record.insert("silent_actors", gather.silent() as f64);
-        if let Some(u) = &uploader {
-            let stats = u.stats();
-            record.insert("registry_backlog", stats.backlog() as f64);
-            record.insert("registry_failed_attempts", stats.failed_attempts() as f64);
-            record.insert("registry_dropped_uploads", stats.dropped() as f64);
-        }
-        // Learner side (decoding chunks, encoding weights) plus the slowest actor's side (fetching
-        // weights, encoding and sending its previous chunk).
-        let transport = decode + weights_seconds + actor_transport;
-        record.insert("transport_seconds", transport);
-        record.insert("transport_share", transport / iteration_seconds.max(1e-9));
-        weights_seconds = 0.0;
         emit_metrics(&session, &metrics_file, &record).await?;
         if let Some(w) = &mut tensorboard
             && let Err(e) = w.write(&record)
@@ -715,16 +564,10 @@ pub async fn run(
             warn!(path = %w.path().display(), "TensorBoard events stopped: {e}");
             tensorboard = None;
         }
-        if new_version - last_checkpoint >= opts.daemon.checkpoint_every.max(1) {
-            let to_registry = uploader.is_some()
-                && new_version - last_registry_checkpoint
-                    >= opts.daemon.registry_checkpoint_every.max(1);
+        if let Some(to_registry) = checkpoints.due(new_version, uploader.is_some()) {
             let target = uploader.as_ref().filter(|_| to_registry);
             save_checkpoint(&ppo, &opts, target, &record)?;
-            last_checkpoint = new_version;
-            if to_registry {
-                last_registry_checkpoint = new_version;
-            }
+            checkpoints.written(new_version, to_registry);
         }
         if let Some(progress) = &progress {
             let _ = progress.send(IterationReport {
@@ -736,10 +579,8 @@ pub async fn run(
     };
 
     // Final checkpoint, whatever stopped us.
-    if ppo.iteration() != last_checkpoint
-        || !checkpoint_path(&opts.run_dir).exists()
-        || (uploader.is_some() && ppo.iteration() != last_registry_checkpoint)
-    {
+    let file_exists = checkpoint_path(&opts.run_dir).exists();
+    if checkpoints.final_due(ppo.iteration(), file_exists, uploader.is_some()) {
         let record = MetricsRecord::new(&run, "learner", ppo.iteration(), unix_ms());
         save_checkpoint(&ppo, &opts, uploader.as_ref(), &record)?;
         info!(iteration = ppo.iteration(), "final checkpoint written");
@@ -764,4 +605,404 @@ pub async fn run(
         dropped_chunks: gather.dropped(),
         rejected_chunks: rejected,
     })
+}
+
+/// Answers `l3p/<run>/policy/weights/<robot>/<version>` queries from `published` until `cancel`.
+async fn spawn_weights_server(
+    session: &Session,
+    run: &str,
+    published: Arc<RwLock<Published>>,
+    cancel: CancellationToken,
+) -> Result<tokio::task::JoinHandle<()>, DaemonError> {
+    let queryable = session
+        .declare_queryable(keys::policy_weights_all(run))
+        .await
+        .map_err(zerr)?;
+    let run = run.to_string();
+    Ok(tokio::spawn(async move {
+        loop {
+            let query = tokio::select! {
+                _ = cancel.cancelled() => break,
+                q = queryable.recv_async() => match q { Ok(q) => q, Err(_) => break },
+            };
+            let key = query.key_expr().as_str().to_string();
+            let reply = match published.read() {
+                Ok(p) => weights_reply(&p, &key, &run),
+                Err(_) => Err(format!("bad weights key {key}")),
+            };
+            let sent = match reply {
+                Ok(bytes) => query.reply(key.clone(), bytes).await,
+                Err(message) => query.reply_err(message.into_bytes()).await,
+            };
+            if let Err(e) = sent {
+                warn!("cannot answer weights query {key}: {e}");
+            }
+        }
+    }))
+}
+
+/// The reply to a weights query `…/<robot>/<version>`: the robot's blob when `version` is the
+/// one served, otherwise an error message for the querier.
+fn weights_reply(published: &Published, key: &str, run: &str) -> Result<Vec<u8>, String> {
+    let parsed = key.rsplitn(3, '/').collect::<Vec<_>>();
+    let [version, robot, _] = parsed.as_slice() else {
+        return Err(format!("bad weights key {key}"));
+    };
+    match version.parse::<u64>() {
+        Ok(v) if v == published.version => published
+            .blobs
+            .get(*robot)
+            .cloned()
+            .ok_or_else(|| format!("unknown robot {robot} in run {run}")),
+        Ok(v) => Err(format!(
+            "policy version {v} is not served (current {})",
+            published.version
+        )),
+        Err(_) => Err(format!("bad weights key {key}")),
+    }
+}
+
+/// What a rollout chunk must be to reach the gather: this run, a robot it trains with that robot's
+/// observation and action sizes, `steps_per_env` steps and observations within the clip.
+struct ChunkContract {
+    run: String,
+    dims: HashMap<String, (usize, usize)>,
+    steps_per_env: usize,
+    obs_clip: f32,
+}
+
+/// Why a chunk was turned away (logged, counted, never fatal).
+#[derive(Debug)]
+struct Rejection {
+    /// The sender, when the chunk decoded far enough to name it.
+    actor: Option<String>,
+    reason: String,
+}
+
+impl ChunkContract {
+    fn of(opts: &LearnerOptions) -> Self {
+        ChunkContract {
+            run: opts.run.clone(),
+            dims: opts
+                .robots
+                .iter()
+                .map(|r| (r.name.clone(), (r.obs_dim, r.action_dim)))
+                .collect(),
+            steps_per_env: opts.steps_per_env,
+            obs_clip: opts.obs_clip,
+        }
+    }
+
+    /// Decodes and checks one chunk payload.
+    fn admit(&self, bytes: &[u8]) -> Result<RolloutChunk, Rejection> {
+        let chunk = codec::decode::<RolloutChunk>(bytes).map_err(|e| Rejection {
+            actor: None,
+            reason: e.to_string(),
+        })?;
+        let checked = match self.dims.get(&chunk.robot) {
+            None => Err(format!(
+                "unknown robot {} (run trains {:?})",
+                chunk.robot,
+                self.dims.keys()
+            )),
+            Some(_) if chunk.run != self.run => Err(format!("chunk of run {}", chunk.run)),
+            Some(&(obs, act)) => chunk
+                .validate_contract(obs, act, self.steps_per_env, self.obs_clip)
+                .map_err(|e| e.to_string()),
+        };
+        match checked {
+            Ok(()) => Ok(chunk),
+            Err(reason) => Err(Rejection {
+                actor: Some(chunk.actor_id.clone()),
+                reason,
+            }),
+        }
+    }
+}
+
+/// Subscribes to the run's rollout chunks and forwards each as [`Event::Chunk`] or
+/// [`Event::Rejected`], adding its decode time to `decode_seconds`.
+async fn spawn_chunk_intake(
+    session: &Session,
+    contract: ChunkContract,
+    tx: mpsc::Sender<Event>,
+    decode_seconds: Arc<std::sync::Mutex<f64>>,
+) -> Result<tokio::task::JoinHandle<()>, DaemonError> {
+    let rollouts = session
+        .declare_subscriber(keys::rollout_all(&contract.run))
+        .await
+        .map_err(zerr)?;
+    Ok(tokio::spawn(async move {
+        while let Ok(sample) = rollouts.recv_async().await {
+            let start = Instant::now();
+            let event = match contract.admit(&sample.payload().to_bytes()) {
+                Ok(chunk) => Event::Chunk(Box::new(chunk)),
+                Err(Rejection { actor, reason }) => {
+                    let actor = actor.unwrap_or_default();
+                    warn!(key = %sample.key_expr(), %actor, "rejected chunk: {reason}");
+                    Event::Rejected
+                }
+            };
+            if let Ok(mut acc) = decode_seconds.lock() {
+                *acc += start.elapsed().as_secs_f64();
+            }
+            if tx.send(event).await.is_err() {
+                break;
+            }
+        }
+    }))
+}
+
+/// Watches the run's actor liveliness tokens (with history) and forwards joins and leaves.
+async fn spawn_liveliness_watch(
+    session: &Session,
+    run: &str,
+    tx: mpsc::Sender<Event>,
+) -> Result<tokio::task::JoinHandle<()>, DaemonError> {
+    let liveliness = session
+        .liveliness()
+        .declare_subscriber(keys::actors_all(run))
+        .history(true)
+        .await
+        .map_err(zerr)?;
+    let run = run.to_string();
+    Ok(tokio::spawn(async move {
+        while let Ok(sample) = liveliness.recv_async().await {
+            let Some((robot, actor)) =
+                keys::parse_actor_liveliness(&run, sample.key_expr().as_str())
+            else {
+                continue;
+            };
+            let id = format!("{robot}/{actor}");
+            let event = match sample.kind() {
+                SampleKind::Put => Event::ActorUp(id),
+                SampleKind::Delete => Event::ActorDown(id),
+            };
+            if tx.send(event).await.is_err() {
+                break;
+            }
+        }
+    }))
+}
+
+/// When to write checkpoints: every `checkpoint_every` iterations locally, every
+/// `registry_checkpoint_every` of those also to the registry, and on shutdown whatever is not yet
+/// written.
+#[derive(Debug, Clone, PartialEq)]
+struct CheckpointSchedule {
+    every: u64,
+    registry_every: u64,
+    last: u64,
+    last_registry: u64,
+}
+
+impl CheckpointSchedule {
+    /// Starting at `iteration` (a resumed run's checkpoint counts as written).
+    fn new(cfg: &DaemonConfig, iteration: u64) -> Self {
+        CheckpointSchedule {
+            every: cfg.checkpoint_every.max(1),
+            registry_every: cfg.registry_checkpoint_every.max(1),
+            last: iteration,
+            last_registry: iteration,
+        }
+    }
+
+    /// After the update that made `version`: `Some(to_registry)` when a checkpoint is due.
+    fn due(&self, version: u64, has_registry: bool) -> Option<bool> {
+        (version - self.last >= self.every)
+            .then(|| has_registry && version - self.last_registry >= self.registry_every)
+    }
+
+    /// Records a checkpoint written at `version`.
+    fn written(&mut self, version: u64, to_registry: bool) {
+        self.last = version;
+        if to_registry {
+            self.last_registry = version;
+        }
+    }
+
+    /// At shutdown: whether `version` still needs its checkpoint (locally or in the registry).
+    fn final_due(&self, version: u64, file_exists: bool, has_registry: bool) -> bool {
+        version != self.last || !file_exists || (has_registry && version != self.last_registry)
+    }
+}
+
+/// Loop-level counts that go into every iteration's metrics.
+struct LoopCounters {
+    actors: usize,
+    dropped_chunks: u64,
+    rejected_chunks: u64,
+    silent_actors: usize,
+    /// The registry uploader's backlog, failed attempts and dropped uploads, if it runs.
+    registry: Option<[u64; 3]>,
+}
+
+/// One iteration's metrics: the update's, the episodes' means, the slowest actor's split of its
+/// collection time, reward terms, timing, throughput and the loop's counters. `learner_transport`
+/// is the learner's side of transport (decoding chunks, encoding weights); the slowest actor's
+/// side (fetching weights, sending its chunk) is added from the chunks.
+fn iteration_record(
+    run: &str,
+    version: u64,
+    update: &UpdateMetrics,
+    chunks: &[RolloutChunk],
+    iteration_seconds: f64,
+    learner_transport: f64,
+    counters: &LoopCounters,
+) -> MetricsRecord {
+    let slowest =
+        |f: fn(&RolloutChunk) -> f32| chunks.iter().map(|c| f(c) as f64).fold(0.0, f64::max);
+    let mut record = MetricsRecord::new(run, "learner", version, unix_ms());
+    update_metrics(&mut record, update);
+    record.insert_episode_means(chunks.iter().flat_map(|c| c.episodes.iter()));
+    let mut stages: std::collections::BTreeMap<&str, f32> = Default::default();
+    for c in chunks {
+        for (name, s) in &c.stage_seconds {
+            let slot = stages.entry(name.as_str()).or_default();
+            *slot = slot.max(*s);
+        }
+    }
+    for (name, s) in stages {
+        record.insert(&format!("time/{name}_seconds"), s as f64);
+    }
+    record.insert_reward_term_means(
+        chunks
+            .iter()
+            .map(|c| (c.reward_terms.as_slice(), c.episodes.as_slice())),
+    );
+    record.insert("iteration_seconds", iteration_seconds);
+    record.insert("collect_seconds", slowest(|c| c.collect_seconds));
+    record.insert(
+        "samples_per_second",
+        update.samples as f64 / iteration_seconds.max(1e-9),
+    );
+    record.insert("actors", counters.actors as f64);
+    record.insert("dropped_chunks", counters.dropped_chunks as f64);
+    record.insert("rejected_chunks", counters.rejected_chunks as f64);
+    record.insert("silent_actors", counters.silent_actors as f64);
+    if let Some([backlog, failed, dropped]) = counters.registry {
+        record.insert("registry_backlog", backlog as f64);
+        record.insert("registry_failed_attempts", failed as f64);
+        record.insert("registry_dropped_uploads", dropped as f64);
+    }
+    let transport = learner_transport + slowest(|c| c.transport_seconds);
+    record.insert("transport_seconds", transport);
+    record.insert("transport_share", transport / iteration_seconds.max(1e-9));
+    record
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn weights_are_served_for_the_current_version_only() {
+        let published = Published {
+            version: 7,
+            blobs: HashMap::from([("a1".to_string(), vec![1, 2, 3])]),
+        };
+        let key = |robot: &str, version: &str| format!("l3p/run/policy/weights/{robot}/{version}");
+        assert_eq!(
+            weights_reply(&published, &key("a1", "7"), "run"),
+            Ok(vec![1, 2, 3])
+        );
+        let stale = weights_reply(&published, &key("a1", "6"), "run").unwrap_err();
+        assert!(
+            stale.contains("version 6 is not served (current 7)"),
+            "{stale}"
+        );
+        let unknown = weights_reply(&published, &key("go1", "7"), "run").unwrap_err();
+        assert!(unknown.contains("unknown robot go1"), "{unknown}");
+        let bad = weights_reply(&published, &key("a1", "latest"), "run").unwrap_err();
+        assert!(bad.contains("bad weights key"), "{bad}");
+        assert!(weights_reply(&published, "x", "run").is_err());
+    }
+
+    fn contract() -> ChunkContract {
+        ChunkContract {
+            run: "run".into(),
+            dims: HashMap::from([("a1".to_string(), (2, 1))]),
+            steps_per_env: 3,
+            obs_clip: 100.0,
+        }
+    }
+
+    fn chunk_bytes(chunk: &RolloutChunk) -> Vec<u8> {
+        codec::encode(chunk).unwrap()
+    }
+
+    /// A chunk that passes every value check (positive action stds).
+    fn chunk(run: &str, robot: &str, steps: usize, obs: usize) -> RolloutChunk {
+        let mut c = RolloutChunk::zeros(run, robot, "x", 0, 4, steps, obs, 1);
+        c.action_stds.fill(1.0);
+        c
+    }
+
+    #[test]
+    fn only_chunks_within_the_run_contract_are_admitted() {
+        let c = contract();
+        let good = chunk("run", "a1", 3, 2);
+        assert_eq!(c.admit(&chunk_bytes(&good)).unwrap().actor_id, "x");
+
+        let garbage = c.admit(&[1, 2, 3]).unwrap_err();
+        assert_eq!(garbage.actor, None);
+        let cases = [
+            (chunk("other", "a1", 3, 2), "chunk of run other"),
+            (chunk("run", "go1", 3, 2), "unknown robot go1"),
+            (chunk("run", "a1", 1, 2), "steps"),
+            (chunk("run", "a1", 3, 5), "obs"),
+            (
+                RolloutChunk::zeros("run", "a1", "x", 0, 4, 3, 2, 1),
+                "action_stds",
+            ),
+        ];
+        for (chunk, why) in cases {
+            let r = c.admit(&chunk_bytes(&chunk)).unwrap_err();
+            assert_eq!(r.actor.as_deref(), Some("x"));
+            assert!(r.reason.contains(why), "{why}: {}", r.reason);
+        }
+        let mut huge = good.clone();
+        huge.observations[0] = 1e30;
+        assert!(
+            c.admit(&chunk_bytes(&huge)).is_err(),
+            "observation outside the clip"
+        );
+    }
+
+    #[test]
+    fn checkpoints_follow_both_intervals_and_shutdown_writes_what_is_missing() {
+        let cfg = DaemonConfig {
+            checkpoint_every: 25,
+            registry_checkpoint_every: 100,
+            ..DaemonConfig::default()
+        };
+        let mut s = CheckpointSchedule::new(&cfg, 0);
+        assert_eq!(s.due(24, true), None);
+        assert_eq!(s.due(25, true), Some(false), "local only");
+        s.written(25, false);
+        assert_eq!(s.due(49, true), None);
+        s.written(50, false);
+        s.written(75, false);
+        assert_eq!(s.due(100, true), Some(true), "also to the registry");
+        assert_eq!(s.due(100, false), Some(false), "no registry in this run");
+        s.written(100, true);
+        assert!(!s.final_due(100, true, true), "everything written");
+        assert!(s.final_due(100, false, true), "the local file is gone");
+        assert!(s.final_due(101, true, false), "one update since");
+        s.written(125, false);
+        assert!(!s.final_due(125, true, false));
+        assert!(s.final_due(125, true, true), "the registry has only 100");
+
+        // A resumed run counts its checkpoint as written; an interval of 0 means every iteration.
+        let resumed = CheckpointSchedule::new(&cfg, 300);
+        assert_eq!(resumed.due(301, true), None);
+        let every = CheckpointSchedule::new(
+            &DaemonConfig {
+                checkpoint_every: 0,
+                ..cfg
+            },
+            0,
+        );
+        assert_eq!(every.due(1, false), Some(false));
+    }
 }

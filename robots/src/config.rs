@@ -430,6 +430,9 @@ pub struct RewardParams {
     pub only_positive_rewards: bool,
     /// Target of `base_height_l2` as a fraction of the robot's standing height.
     pub base_height_fraction: f32,
+    /// Peak swing height of `feet_clearance` (the sole above the terrain under it) as a fraction
+    /// of the robot's standing height: 0.25 is 7.5 cm for A1, above the lowest stair riser (5 cm).
+    pub feet_clearance_fraction: f32,
 }
 
 impl Default for RewardParams {
@@ -442,6 +445,7 @@ impl Default for RewardParams {
             contact_threshold: 1.0,
             only_positive_rewards: false,
             base_height_fraction: 1.0,
+            feet_clearance_fraction: 0.25,
         }
     }
 }
@@ -477,6 +481,10 @@ reward_terms! {
     /// when the robot is far from its command (standing at a 1 m/s command the sharp kernel with
     /// std 0.35 pays e⁻⁸ and its gradient has vanished).
     TrackLinVelXyCoarseExp => track_lin_vel_xy_coarse_exp = 0.0,
+    /// Σ over the feet the trot clock swings of `max(h* − h, 0)²`: h the sole's height above the
+    /// terrain under it, h* = `feet_clearance_fraction` × standing height × sin(π · swing
+    /// progress) (`task::gait_clock_swing_height`). Zero without a gait clock or a move command.
+    FeetClearance => feet_clearance = 0.0,
 }
 
 impl RewardScales {
@@ -1047,6 +1055,10 @@ impl EnvConfig {
         check_pos(
             "reward_params.base_height_fraction",
             self.reward_params.base_height_fraction,
+        )?;
+        check_nonneg(
+            "reward_params.feet_clearance_fraction",
+            self.reward_params.feet_clearance_fraction,
         )?;
         let terrain = self.terrain.resolve(robot)?;
         let step_dt = self.sim_dt * self.decimation as f32;

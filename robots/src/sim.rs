@@ -778,6 +778,20 @@ impl SimWorld {
         out.foot_force = r.foot_force;
         out.penalised_force = r.penalised_force;
         out.base_force = r.base_force;
+        for (sole, cols) in out.foot_sole.iter_mut().zip(&r.feet) {
+            let mut lo = [f32::INFINITY; 3];
+            let mut hi = [f32::NEG_INFINITY; 3];
+            for c in cols.iter().filter_map(|h| self.world.colliders.get(*h)) {
+                let aabb = c.compute_aabb();
+                for k in 0..3 {
+                    lo[k] = lo[k].min(aabb.mins[k]);
+                    hi[k] = hi[k].max(aabb.maxs[k]);
+                }
+            }
+            if lo[2].is_finite() {
+                *sole = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), lo[2]];
+            }
+        }
     }
 
     /// Teleports a robot: base pose, base velocity (world frame, linear at the base origin and

@@ -82,6 +82,9 @@ pub struct SimState {
     pub penalised_force: [f32; MAX_PENALISED_BODIES],
     /// Contact force norm on the base / trunk (termination bodies).
     pub base_force: f32,
+    /// World position of each foot's lowest point: the centre x, y and the minimum z of the
+    /// foot colliders' bounding box (for `feet_clearance`).
+    pub foot_sole: [[f32; 3]; NUM_FEET],
 }
 
 impl Default for SimState {
@@ -97,6 +100,7 @@ impl Default for SimState {
             foot_force: [0.0; NUM_FEET],
             penalised_force: [0.0; MAX_PENALISED_BODIES],
             base_force: 0.0,
+            foot_sole: [[0.0; 3]; NUM_FEET],
         }
     }
 }
@@ -114,6 +118,7 @@ impl SimState {
             && self.foot_force.iter().all(|v| v.is_finite())
             && self.penalised_force.iter().all(|v| v.is_finite())
             && self.base_force.is_finite()
+            && self.foot_sole.iter().flatten().all(|v| v.is_finite())
     }
 
     /// Base linear velocity in the base frame.
@@ -405,6 +410,15 @@ pub fn gait_clock_observation(phase: f32) -> [f32; 2] {
 pub fn gait_clock_stance(phase: f32) -> [bool; NUM_FEET] {
     let first_half = phase < 0.5;
     [first_half, !first_half, !first_half, first_half]
+}
+
+/// Target sole height of each foot at clock `phase`: `peak · sin(π · s)` for a foot the clock
+/// swings, with s ∈ [0, 1) its progress through the swing half-cycle, and 0 for a stance foot.
+pub fn gait_clock_swing_height(phase: f32, peak: f32) -> [f32; NUM_FEET] {
+    let stance = gait_clock_stance(phase);
+    let progress = 2.0 * phase.rem_euclid(0.5);
+    let h = peak * (std::f32::consts::PI * progress).sin();
+    stance.map(|s| if s { 0.0 } else { h })
 }
 
 /// Share of feet whose contact (force above `threshold`) matches [`gait_clock_stance`].
@@ -900,6 +914,18 @@ impl Task {
                 let phase = self.gait_phase(env);
                 raw[RewardTerm::GaitClock as usize] =
                     gait_clock_match(&state.foot_force, p.contact_threshold, phase);
+                let peak = p.feet_clearance_fraction * self.robot.standing_height;
+                let target = gait_clock_swing_height(phase, peak);
+                raw[RewardTerm::FeetClearance as usize] = state
+                    .foot_sole
+                    .iter()
+                    .zip(target)
+                    .filter(|(_, h)| *h > 0.0)
+                    .map(|(sole, h)| {
+                        let clearance = sole[2] - terrain.height_at(sole[0], sole[1]);
+                        (h - clearance).max(0.0).powi(2)
+                    })
+                    .sum();
             }
         }
         let mut deviation = 0.0;
@@ -1461,6 +1487,48 @@ mod tests {
         st.foot_force = [0.0, 40.0, 40.0, 0.0];
         let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
         assert_eq!(r.terms[RewardTerm::GaitClock as usize], 0.0);
+    }
+
+    #[test]
+    fn feet_clearance_matches_hand_computation() {
+        // Peak at mid-swing, zero at lift-off and touch-down, zero for stance feet.
+        assert_eq!(gait_clock_swing_height(0.25, 0.08), [0.0, 0.08, 0.08, 0.0]);
+        assert_eq!(gait_clock_swing_height(0.75, 0.08), [0.08, 0.0, 0.0, 0.08]);
+        assert_eq!(gait_clock_swing_height(0.0, 0.08), [0.0; 4]);
+        let h = gait_clock_swing_height(0.1, 0.08);
+        assert!((h[1] - 0.08 * (0.2 * std::f32::consts::PI).sin()).abs() < 1e-7);
+
+        let mut cfg = EnvConfig::default();
+        cfg.terrain.preset = TerrainPreset::Flat;
+        cfg.height_scan = false;
+        cfg.gait_clock_hz = 2.0;
+        cfg.rewards.feet_clearance = Some(-30.0);
+        let spec = cfg.resolve("a1").unwrap();
+        let terrain = Terrain::generate(&spec.terrain).unwrap();
+        let mut task = Task::new(spec, a1_params()).unwrap();
+        task.spec.noise.enabled = false;
+        let mut rng = StdRng::seed_from_u64(3);
+        let mut st = standing_state();
+        let mut env = commanded_half_speed(&task, &st, &mut rng);
+        // Step 1 lands at phase 0.04: FR + RL swing towards 0.25 × standing height × sin(0.08π).
+        // FR's sole is 1 cm up (short by the rest), RL's is above its target (no penalty), and
+        // the stance feet sink 5 mm into the ground (not penalised: the term is about swing).
+        let peak = 0.25 * task.robot.standing_height;
+        let target = peak * (0.08 * std::f32::consts::PI).sin();
+        st.foot_sole = [
+            [0.2, 0.15, -0.005],
+            [0.2, -0.15, 0.01],
+            [-0.2, 0.15, target + 0.02],
+            [-0.2, -0.15, -0.005],
+        ];
+        let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
+        let want = -30.0 * (target - 0.01).powi(2) * 0.02;
+        let got = r.terms[RewardTerm::FeetClearance as usize];
+        assert!(want < 0.0 && (got - want).abs() < 1e-8, "{got} vs {want}");
+        // Not commanded to move: no clearance asked.
+        env.command.vx = 0.0;
+        let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
+        assert_eq!(r.terms[RewardTerm::FeetClearance as usize], 0.0);
     }
 
     #[test]

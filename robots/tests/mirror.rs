@@ -100,6 +100,10 @@ fn mirror_state(s: &SimState, joints: &SignedPermutation) -> SimState {
         s.foot_force[3],
         s.foot_force[2],
     ];
+    m.foot_sole = [1, 0, 3, 2].map(|f| {
+        let p = s.foot_sole[f];
+        [p[0], -p[1], p[2]]
+    });
     m
 }
 

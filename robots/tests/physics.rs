@@ -82,6 +82,28 @@ fn every_robot_stands_at_its_kinematic_height_with_stiff_gains() {
             spec.name
         );
         assert_eq!(s.base_force, 0.0, "{}: base touches the ground", spec.name);
+        // The soles rest on the ground (within the contact's few mm), FL front-left to RR
+        // rear-right, below the hips.
+        for (f, sole) in s.foot_sole.iter().enumerate() {
+            assert!(
+                sole[2].abs() < 0.01,
+                "{} foot {f}: sole at {sole:?}",
+                spec.name
+            );
+            let (front, left) = (f < 2, f % 2 == 0);
+            assert_eq!(
+                sole[0] > s.base_pos[0],
+                front,
+                "{} foot {f}: {sole:?}",
+                spec.name
+            );
+            assert_eq!(
+                sole[1] > s.base_pos[1],
+                left,
+                "{} foot {f}: {sole:?}",
+                spec.name
+            );
+        }
     }
 }
 
