@@ -129,8 +129,8 @@ pub fn mirror(config: &Config, robot: &Robot) -> anyhow::Result<l3p_learner::Mir
 
 /// The policy's description of a robot under this config, with the controller contract
 /// ([`l3p_policy::RobotIo`]) that travels into checkpoints and deploy artifacts.
-pub fn policy_robot(config: &Config, robot: &Robot) -> anyhow::Result<l3p_policy::RobotSpec> {
-    Ok(l3p_policy::RobotSpec {
+pub fn policy_robot(config: &Config, robot: &Robot) -> anyhow::Result<l3p_policy::PolicyRobot> {
+    Ok(l3p_policy::PolicyRobot {
         name: robot.name.to_string(),
         obs_dim: obs_dim(config),
         action_dim: l3p_robots::catalog::NUM_JOINTS,

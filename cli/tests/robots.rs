@@ -339,6 +339,11 @@ fn a_policy_trained_for_an_added_robot_deploys_to_its_simulated_robot() {
     assert!(!out.contains("panicked"), "{out}");
 
     let (deploy_port, deploy_ep) = deploy_endpoint(port);
+    // Staleness bound 10 periods instead of 3: on a loaded machine states arrive 60-70 ms late and
+    // the controller would rightly damp; this test is about the added robot, not that rule
+    // (cli/tests/deploy.rs tests it).
+    let config = cwd.join("deploy.toml");
+    std::fs::write(&config, "[deploy]\nstale_periods = 10.0\n").unwrap();
     procs.spawn_split_in_dir(
         "deploy",
         &[
@@ -349,6 +354,8 @@ fn a_policy_trained_for_an_added_robot_deploys_to_its_simulated_robot() {
             "porch",
             "--policy",
             "porch-porch_dog@latest",
+            "--config",
+            config.to_str().unwrap(),
             "--connect",
             &endpoint,
             "--listen",
@@ -366,7 +373,12 @@ fn a_policy_trained_for_an_added_robot_deploys_to_its_simulated_robot() {
             "--robot-id",
             "porch",
             "--duration",
-            "6",
+            "8",
+            // The robot side's own watchdog at 300 ms instead of 100: a loaded machine delays
+            // commands by more than 100 ms now and then, and the summary must not count that as
+            // the policy's damping.
+            "--command-timeout",
+            "0.3",
             "--connect",
             &deploy_ep,
         ],

@@ -506,7 +506,7 @@ fn bad_safety_settings_are_errors() {
 }
 
 fn export_for(robot: &str) -> Vec<u8> {
-    use l3p_policy::{PolicyConfig, PolicyModel, RobotSpec as PolicyRobot};
+    use l3p_policy::{PolicyConfig, PolicyModel, PolicyRobot};
     let r = RobotSpec::by_name(robot).unwrap();
     let mut cfg = PolicyConfig::default();
     cfg.encoder_hidden = vec![16];

@@ -203,7 +203,7 @@ pub fn mlp_params(input: usize, hidden: &[usize], output: usize) -> usize {
 /// raw action (`q* = default + action_scale · a`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct RobotSpec {
+pub struct PolicyRobot {
     pub name: String,
     pub obs_dim: usize,
     pub action_dim: usize,
@@ -356,7 +356,7 @@ fn default_action_scale() -> f32 {
     0.25
 }
 
-impl RobotSpec {
+impl PolicyRobot {
     pub fn new(name: &str, obs_dim: usize, action_dim: usize) -> Self {
         Self {
             name: name.to_string(),

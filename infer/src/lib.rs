@@ -4,7 +4,7 @@
 //!
 //! # Public API
 //! - Description ([`config`]): [`PolicyConfig`] (architecture, latent and hidden sizes, [`Arch`],
-//!   [`RecoveryConfig`]), [`RobotSpec`] (a robot as the policy sees it: name, dims, action scale,
+//!   [`RecoveryConfig`]), [`PolicyRobot`] (a robot as the policy sees it: name, dims, action scale,
 //!   [`RobotIo`]), [`RobotIo`] (the robot I/O contract — observation layout as [`ObsSegment`]s,
 //!   default pose, gains, limits, period — versioned by [`IO_VERSION`]).
 //! - Exports ([`export`]): the `l3p-export-v1` format ([`ExportConfig`], [`ExportLayer`],
@@ -18,7 +18,7 @@ pub mod config;
 pub mod export;
 
 pub use config::{
-    Arch, IO_VERSION, ObsSegment, PolicyConfig, RecoveryConfig, RobotIo, RobotSpec, mlp_params,
+    Arch, IO_VERSION, ObsSegment, PolicyConfig, PolicyRobot, RecoveryConfig, RobotIo, mlp_params,
 };
 pub use export::{
     DeployPolicy, EXPORT_FORMAT, ExportConfig, ExportLayer, InferScratch, read_export_json,

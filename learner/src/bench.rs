@@ -5,7 +5,7 @@
 use std::time::Instant;
 
 use l3p_policy::{
-    Arch, DeployPolicy, InferScratch, PolicyConfig, RobotSpec, export_bytes, train_device,
+    Arch, DeployPolicy, InferScratch, PolicyConfig, PolicyRobot, export_bytes, train_device,
 };
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -133,7 +133,7 @@ fn bench_in_pool(cfg: &LearnerBenchConfig) -> Result<LearnerBenchReport, Learner
             },
         ),
     };
-    let spec = RobotSpec::new("bench", cfg.obs_dim, cfg.action_dim);
+    let spec = PolicyRobot::new("bench", cfg.obs_dim, cfg.action_dim);
     let actor_params = policy.actor_params(cfg.obs_dim, cfg.action_dim);
     let model = crate::init_model(
         ppo_cfg.mode,

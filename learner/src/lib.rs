@@ -30,6 +30,7 @@ pub mod bench;
 pub mod daemon;
 pub mod gae;
 pub mod gather;
+mod links;
 pub mod ppo;
 pub mod raster;
 pub mod report;
@@ -45,7 +46,7 @@ pub use ppo::{
 pub use storage::{RobotRollout, RolloutBatch};
 
 use burn::tensor::Device;
-use l3p_policy::{PolicyConfig, PolicyError, PolicyModel, RobotSpec};
+use l3p_policy::{PolicyConfig, PolicyError, PolicyModel, PolicyRobot};
 
 /// Errors of the learner library.
 #[derive(Debug, thiserror::Error)]
@@ -74,7 +75,7 @@ pub enum LearnerError {
 pub fn init_model(
     mode: Mode,
     mut config: PolicyConfig,
-    robots: Vec<RobotSpec>,
+    robots: Vec<PolicyRobot>,
     init_from: Option<&std::path::Path>,
     heads: TransferHeads,
     device: &Device,
@@ -102,7 +103,7 @@ pub fn init_model(
 pub fn transfer_model(
     mode: Mode,
     source: PolicyModel,
-    robots: Vec<RobotSpec>,
+    robots: Vec<PolicyRobot>,
     heads: TransferHeads,
     device: &Device,
 ) -> Result<PolicyModel, LearnerError> {

@@ -62,30 +62,20 @@ impl Mode {
             Mode::L3p | Mode::L3pTransfer => Arch::L3p,
         }
     }
-
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Mode::Mlp => "mlp",
-            Mode::L3p => "l3p",
-            Mode::MlpTransfer => "mlp-transfer",
-            Mode::L3pTransfer => "l3p-transfer",
-        }
-    }
 }
+
+l3p_proto::string_enum!(Mode {
+    Mlp => "mlp",
+    L3p => "l3p",
+    MlpTransfer => "mlp-transfer",
+    L3pTransfer => "l3p-transfer",
+});
 
 impl std::str::FromStr for Mode {
     type Err = LearnerError;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Ok(match s {
-            "mlp" => Mode::Mlp,
-            "l3p" => Mode::L3p,
-            "mlp-transfer" => Mode::MlpTransfer,
-            "l3p-transfer" => Mode::L3pTransfer,
-            other => {
-                return Err(LearnerError::Config(format!(
-                    "unknown mode {other}\nhint: one of mlp, l3p, mlp-transfer, l3p-transfer"
-                )));
-            }
+        Self::from_name(s).ok_or_else(|| {
+            LearnerError::Config(format!("unknown mode {s}\nhint: one of {}", Self::names()))
         })
     }
 }
@@ -1251,4 +1241,24 @@ pub fn param_ids<M: Module>(module: &M) -> Vec<ParamId> {
     let mut v = ParamIds(Vec::new());
     module.visit(&mut v);
     v.0.into_iter().map(|(id, _)| id).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mode_names_are_its_serde_names_and_parse_back() {
+        for mode in Mode::ALL {
+            let json = serde_json::to_string(&mode).unwrap();
+            assert_eq!(json, format!("\"{mode}\""));
+            assert_eq!(serde_json::from_str::<Mode>(&json).unwrap(), mode);
+            assert_eq!(mode.as_str().parse::<Mode>().unwrap(), mode);
+        }
+        let err = "ppo".parse::<Mode>().unwrap_err().to_string();
+        assert!(
+            err.contains("one of mlp, l3p, mlp-transfer or l3p-transfer"),
+            "{err}"
+        );
+    }
 }

@@ -5,7 +5,7 @@ mod common;
 
 use common::*;
 use l3p_learner::{Mode, Ppo, PpoConfig, TransferHeads, init_model};
-use l3p_policy::{PolicyConfig, RecoveryConfig, RobotSpec, train_device};
+use l3p_policy::{PolicyConfig, PolicyRobot, RecoveryConfig, train_device};
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 
@@ -35,7 +35,7 @@ fn learns(mode: Mode) {
     let model = init_model(
         mode,
         small_config(),
-        vec![RobotSpec::new("pm", OBS, ACT)],
+        vec![PolicyRobot::new("pm", OBS, ACT)],
         None,
         TransferHeads::Fresh,
         &device,

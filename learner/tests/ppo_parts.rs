@@ -8,7 +8,7 @@ use common::*;
 use l3p_learner::ppo::{approx_kl, surrogate_loss, value_loss};
 use l3p_learner::*;
 use l3p_policy::{
-    PolicyConfig, RecoveryConfig, RobotSpec, core_sha256, cpu_device, tensor_to_vec, train_device,
+    PolicyConfig, PolicyRobot, RecoveryConfig, core_sha256, cpu_device, tensor_to_vec, train_device,
 };
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -157,7 +157,7 @@ fn l3p_transfer_keeps_the_core_bit_identical_and_trains_adapters() {
     let src = init_model(
         Mode::L3p,
         small_config(),
-        vec![RobotSpec::new("a1", OBS, ACT)],
+        vec![PolicyRobot::new("a1", OBS, ACT)],
         None,
         TransferHeads::Fresh,
         &device,
@@ -179,7 +179,7 @@ fn l3p_transfer_keeps_the_core_bit_identical_and_trains_adapters() {
     let model = init_model(
         Mode::L3pTransfer,
         small_config(),
-        vec![RobotSpec::new("pm", OBS, ACT)],
+        vec![PolicyRobot::new("pm", OBS, ACT)],
         Some(&path),
         TransferHeads::Fresh,
         &device,
@@ -234,7 +234,7 @@ fn l3p_transfer_with_prototype_heads_starts_as_the_source_policy() {
     let src = init_model(
         Mode::L3p,
         small_config(),
-        vec![RobotSpec::new("a1", OBS, ACT)],
+        vec![PolicyRobot::new("a1", OBS, ACT)],
         None,
         TransferHeads::Fresh,
         &device,
@@ -248,7 +248,7 @@ fn l3p_transfer_with_prototype_heads_starts_as_the_source_policy() {
         .unwrap()
         .save(&path)
         .unwrap();
-    let load = |heads, robot: RobotSpec| {
+    let load = |heads, robot: PolicyRobot| {
         init_model(
             Mode::L3pTransfer,
             small_config(),
@@ -258,13 +258,13 @@ fn l3p_transfer_with_prototype_heads_starts_as_the_source_policy() {
             &device,
         )
     };
-    let warm = load(TransferHeads::Prototype, RobotSpec::new("go1", OBS, ACT)).unwrap();
+    let warm = load(TransferHeads::Prototype, PolicyRobot::new("go1", OBS, ACT)).unwrap();
     assert_eq!(
         warm.act_mean_host(0, &obs).unwrap(),
         want,
         "prototype heads: the new robot acts exactly as the source robot did"
     );
-    let fresh = load(TransferHeads::Fresh, RobotSpec::new("go1", OBS, ACT)).unwrap();
+    let fresh = load(TransferHeads::Fresh, PolicyRobot::new("go1", OBS, ACT)).unwrap();
     assert_ne!(fresh.act_mean_host(0, &obs).unwrap(), want);
     assert_eq!(
         core_sha256(&warm.net).unwrap(),
@@ -273,7 +273,7 @@ fn l3p_transfer_with_prototype_heads_starts_as_the_source_policy() {
     );
     let err = load(
         TransferHeads::Prototype,
-        RobotSpec::new("hexapod", OBS, ACT + 6),
+        PolicyRobot::new("hexapod", OBS, ACT + 6),
     )
     .unwrap_err()
     .to_string();
@@ -282,7 +282,7 @@ fn l3p_transfer_with_prototype_heads_starts_as_the_source_policy() {
     assert!(
         load(
             TransferHeads::Fresh,
-            RobotSpec::new("hexapod", OBS, ACT + 6)
+            PolicyRobot::new("hexapod", OBS, ACT + 6)
         )
         .is_ok()
     );
@@ -294,7 +294,7 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
     let model = init_model(
         Mode::L3p,
         small_config(),
-        vec![RobotSpec::new("pm", OBS, ACT)],
+        vec![PolicyRobot::new("pm", OBS, ACT)],
         None,
         TransferHeads::Fresh,
         &device,
@@ -321,7 +321,7 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
     let mlp = init_model(
         Mode::Mlp,
         small_config(),
-        vec![RobotSpec::new("a1", OBS, ACT)],
+        vec![PolicyRobot::new("a1", OBS, ACT)],
         None,
         TransferHeads::Fresh,
         &device,
@@ -345,7 +345,7 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
     let go1 = init_model(
         Mode::MlpTransfer,
         small_config(),
-        vec![RobotSpec::new("go1", OBS, ACT)],
+        vec![PolicyRobot::new("go1", OBS, ACT)],
         Some(&path),
         TransferHeads::Fresh,
         &device,
@@ -357,7 +357,7 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
         init_model(
             Mode::L3pTransfer,
             small_config(),
-            vec![RobotSpec::new("go1", OBS, ACT)],
+            vec![PolicyRobot::new("go1", OBS, ACT)],
             Some(&path),
             TransferHeads::Fresh,
             &device
@@ -368,7 +368,7 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
         init_model(
             Mode::MlpTransfer,
             small_config(),
-            vec![RobotSpec::new("go1", OBS, ACT)],
+            vec![PolicyRobot::new("go1", OBS, ACT)],
             None,
             TransferHeads::Fresh,
             &device
@@ -385,7 +385,7 @@ fn checkpoint_resume_gives_identical_actions_and_state() {
     let model = init_model(
         Mode::L3p,
         small_config(),
-        vec![RobotSpec::new("pm", OBS, ACT)],
+        vec![PolicyRobot::new("pm", OBS, ACT)],
         None,
         TransferHeads::Fresh,
         &device,
@@ -429,7 +429,7 @@ fn mlp_ppo() -> Ppo {
     let model = init_model(
         Mode::Mlp,
         small_config(),
-        vec![RobotSpec::new("pm", OBS, ACT)],
+        vec![PolicyRobot::new("pm", OBS, ACT)],
         None,
         TransferHeads::Fresh,
         &device,

@@ -4,7 +4,7 @@
 //! between the seeding and the init would make this flaky.
 
 use l3p_learner::{Mode, TransferHeads, init_model};
-use l3p_policy::{PolicyConfig, RobotSpec, core_sha256, train_device};
+use l3p_policy::{PolicyConfig, PolicyRobot, core_sha256, train_device};
 
 fn fresh_core_hash(seed: u64) -> String {
     let device = train_device();
@@ -20,7 +20,7 @@ fn fresh_core_hash(seed: u64) -> String {
             critic_hidden: vec![16],
             ..Default::default()
         },
-        vec![RobotSpec::new("pm", 6, 2)],
+        vec![PolicyRobot::new("pm", 6, 2)],
         None,
         TransferHeads::Fresh,
         &device,

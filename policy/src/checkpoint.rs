@@ -19,7 +19,7 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use crate::PolicyError;
-use crate::config::{PolicyConfig, RobotSpec};
+use crate::config::{PolicyConfig, PolicyRobot};
 use crate::infer::{EXPORT_FORMAT, ExportConfig, ExportLayer, export_metadata};
 use crate::model::{PolicyModel, PolicyNet, RobotHeads, tensor_to_vec};
 use crate::nets::Mlp;
@@ -34,7 +34,7 @@ const MAX_HEADER: u64 = 16 << 20;
 pub struct CheckpointHeader {
     pub format: String,
     pub config: PolicyConfig,
-    pub robots: Vec<RobotSpec>,
+    pub robots: Vec<PolicyRobot>,
     pub iteration: u64,
     /// Learner state that is not tensors (learning rate, mode, …).
     #[serde(default)]

@@ -3,7 +3,7 @@
 //!
 //! # Public API
 //! - Config: [`PolicyConfig`] (TOML section; [`Arch`] `mlp` | `l3p`, `d_h`, `d_z`, hidden sizes,
-//!   [`RecoveryConfig`] with diffusion steps and λ), [`RobotSpec`] (name, dims, action scale).
+//!   [`RecoveryConfig`] with diffusion steps and λ), [`PolicyRobot`] (name, dims, action scale).
 //! - Model: [`PolicyModel::new`]`(config, robots, &device)` → [`PolicyModel`] holding a burn
 //!   [`PolicyNet`] (one shared core, a [`RobotHeads`] per robot: encoder `E_r`, decoder `D_r`, std,
 //!   critic, `R_obs` [`ObsDiffusion`], `R_act`). [`PolicyNet::actors`] runs several robots through the
@@ -17,7 +17,7 @@
 //! - Inference without burn: [`DeployPolicy`] (`load`, `from_bytes`, `act`, `act_into`, `sample`).
 //! - Devices: [`cpu_device`] (`flex`, the measured choice), [`train_device`] (its autodiff form).
 //!
-//! Architecture invariant: no zenoh, no rapier; this crate knows robots only as [`RobotSpec`]s.
+//! Architecture invariant: no zenoh, no rapier; this crate knows robots only as [`PolicyRobot`]s.
 
 pub mod checkpoint;
 pub mod diffusion;
@@ -34,7 +34,7 @@ pub use checkpoint::{
 };
 pub use diffusion::{DdpmSchedule, ObsDiffusion, ObsDiffusionConfig};
 pub use l3p_infer::{
-    Arch, IO_VERSION, ObsSegment, PolicyConfig, RecoveryConfig, RobotIo, RobotSpec, mlp_params,
+    Arch, IO_VERSION, ObsSegment, PolicyConfig, PolicyRobot, RecoveryConfig, RobotIo, mlp_params,
 };
 pub use l3p_infer::{
     DeployPolicy, EXPORT_FORMAT, ExportConfig, ExportLayer, InferScratch, replace_export_config,

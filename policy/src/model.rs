@@ -1,6 +1,6 @@
 //! The multi-robot policy: [`PolicyNet`] (the burn module: one optional shared core `π_core` and one
 //! [`RobotHeads`] per robot) wrapped by [`PolicyModel`] (the module plus its [`PolicyConfig`] and the
-//! [`RobotSpec`] of each robot, in the same order as `PolicyNet::robots`).
+//! [`PolicyRobot`] of each robot, in the same order as `PolicyNet::robots`).
 //!
 //! Architecture `l3p`: `obs ─E_r→ h ─π_core→ z ─D_r→ mean`; architecture `mlp`: `obs ─MLP_r→ mean`
 //! (the `encoder` field then holds the whole actor and `core`/`decoder` are `None`). Both have a
@@ -10,7 +10,7 @@ use burn::module::{Module, Param};
 use burn::tensor::{Device, Tensor, TensorData};
 
 use crate::PolicyError;
-use crate::config::{Arch, PolicyConfig, RobotSpec};
+use crate::config::{Arch, PolicyConfig, PolicyRobot};
 use crate::diffusion::{ObsDiffusion, ObsDiffusionConfig};
 use crate::nets::{Mlp, MlpConfig};
 
@@ -57,7 +57,7 @@ pub const MIN_STD: f32 = 1e-6;
 
 impl RobotHeads {
     /// Fresh heads for one robot.
-    pub fn init(config: &PolicyConfig, spec: &RobotSpec, device: &Device) -> Self {
+    pub fn init(config: &PolicyConfig, spec: &PolicyRobot, device: &Device) -> Self {
         let std = Tensor::<1>::from_data(
             TensorData::new(vec![config.init_std; spec.action_dim], [spec.action_dim]),
             device,
@@ -188,7 +188,7 @@ impl PolicyNet {
 pub struct PolicyModel {
     pub net: PolicyNet,
     pub config: PolicyConfig,
-    pub robots: Vec<RobotSpec>,
+    pub robots: Vec<PolicyRobot>,
 }
 
 impl Clone for PolicyModel {
@@ -205,7 +205,7 @@ impl PolicyModel {
     /// A freshly initialised model for `robots` (names must be unique).
     pub fn new(
         config: PolicyConfig,
-        robots: Vec<RobotSpec>,
+        robots: Vec<PolicyRobot>,
         device: &Device,
     ) -> Result<Self, PolicyError> {
         config.validate()?;
@@ -260,7 +260,7 @@ impl PolicyModel {
     }
 
     /// Add fresh heads for a new robot (transfer to a new morphology). The core is untouched.
-    pub fn add_robot(&mut self, spec: RobotSpec, device: &Device) -> Result<usize, PolicyError> {
+    pub fn add_robot(&mut self, spec: PolicyRobot, device: &Device) -> Result<usize, PolicyError> {
         if self.robots.iter().any(|r| r.name == spec.name) {
             return Err(PolicyError::Config(format!(
                 "robot {} already in the model",
@@ -276,7 +276,7 @@ impl PolicyModel {
 
     /// Keep only the named robots (in the given order), e.g. to drop the pretraining robot.
     pub fn retain_robots(self, names: &[&str]) -> Result<Self, PolicyError> {
-        let mut slots: Vec<Option<(RobotHeads, RobotSpec)>> = self
+        let mut slots: Vec<Option<(RobotHeads, PolicyRobot)>> = self
             .net
             .robots
             .into_iter()

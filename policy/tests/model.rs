@@ -77,7 +77,7 @@ fn elu_rewrite_matches_definition_and_gradient() {
 fn parameter_counts_and_matched_mlp_budget() {
     let d = cpu_device();
     let cfg = PolicyConfig::default();
-    let model = PolicyModel::new(cfg.clone(), vec![RobotSpec::new("a1", 48, 12)], &d).unwrap();
+    let model = PolicyModel::new(cfg.clone(), vec![PolicyRobot::new("a1", 48, 12)], &d).unwrap();
     let report = model.param_report();
     assert!(
         report.contains("core") && report.contains("a1.r_obs"),
@@ -128,7 +128,7 @@ fn config_toml_is_strict_and_defaults_fill_in() {
 #[test]
 fn several_robots_share_the_core_in_one_batch() {
     let d = cpu_device();
-    let robots = vec![RobotSpec::new("a1", 6, 3), RobotSpec::new("spot", 5, 2)];
+    let robots = vec![PolicyRobot::new("a1", 6, 3), PolicyRobot::new("spot", 5, 2)];
     let model = PolicyModel::new(small(), robots, &d).unwrap();
     let mut rng = StdRng::seed_from_u64(1);
     let oa: Vec<f32> = (0..4 * 6).map(|_| rng.random_range(-1.0..1.0)).collect();
@@ -233,7 +233,7 @@ fn diffusion_recovery_beats_the_mean_predictor() {
 #[test]
 fn checkpoint_round_trip_gives_identical_actions() {
     let d = train_device();
-    let model = PolicyModel::new(small(), vec![RobotSpec::new("go1", 6, 3)], &d).unwrap();
+    let model = PolicyModel::new(small(), vec![PolicyRobot::new("go1", 6, 3)], &d).unwrap();
     let obs: Vec<f32> = (0..5 * 6).map(|i| (i as f32 * 0.37).sin()).collect();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("ck.bin");
@@ -287,7 +287,7 @@ fn export_reloads_in_a_fresh_process() {
     for arch in [Arch::L3p, Arch::Mlp] {
         let model = PolicyModel::new(
             PolicyConfig { arch, ..small() },
-            vec![RobotSpec::new("go1", 6, 3)],
+            vec![PolicyRobot::new("go1", 6, 3)],
             &d,
         )
         .unwrap();
@@ -336,7 +336,7 @@ fn export_reloads_in_a_fresh_process() {
 fn bad_exports_are_errors() {
     assert!(DeployPolicy::from_bytes(b"not safetensors").is_err());
     let d = cpu_device();
-    let model = PolicyModel::new(small(), vec![RobotSpec::new("go1", 6, 3)], &d).unwrap();
+    let model = PolicyModel::new(small(), vec![PolicyRobot::new("go1", 6, 3)], &d).unwrap();
     let (bytes, _) = export_bytes(&model, "go1").unwrap();
     let p = DeployPolicy::from_bytes(&bytes).unwrap();
     assert!(
@@ -352,7 +352,7 @@ fn bad_exports_are_errors() {
 #[test]
 fn parallel_batch_inference_equals_row_by_row() {
     let d = cpu_device();
-    let model = PolicyModel::new(small(), vec![RobotSpec::new("go1", 6, 3)], &d).unwrap();
+    let model = PolicyModel::new(small(), vec![PolicyRobot::new("go1", 6, 3)], &d).unwrap();
     let (bytes, _) = export_bytes(&model, "go1").unwrap();
     let p = DeployPolicy::from_bytes(&bytes).unwrap();
     let n = 301; // not a multiple of the block size

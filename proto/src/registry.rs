@@ -46,46 +46,23 @@ pub enum ArtifactKind {
     Robot,
 }
 
-impl ArtifactKind {
-    pub const ALL: [ArtifactKind; 6] = [
-        Self::Core,
-        Self::Adapter,
-        Self::Mlp,
-        Self::Checkpoint,
-        Self::Deploy,
-        Self::Robot,
-    ];
-
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::Core => "core",
-            Self::Adapter => "adapter",
-            Self::Mlp => "mlp",
-            Self::Checkpoint => "checkpoint",
-            Self::Deploy => "deploy",
-            Self::Robot => "robot",
-        }
-    }
-}
-
-impl fmt::Display for ArtifactKind {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.pad(self.as_str())
-    }
-}
+crate::string_enum!(ArtifactKind {
+    Core => "core",
+    Adapter => "adapter",
+    Mlp => "mlp",
+    Checkpoint => "checkpoint",
+    Deploy => "deploy",
+    Robot => "robot",
+});
 
 impl FromStr for ArtifactKind {
     type Err = RefError;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Self::ALL
-            .into_iter()
-            .find(|k| k.as_str() == s)
-            .ok_or_else(|| RefError {
-                input: s.to_string(),
-                reason: "unknown artifact kind (expected core, adapter, mlp, checkpoint, deploy or robot)"
-                    .into(),
-            })
+        Self::from_name(s).ok_or_else(|| RefError {
+            input: s.to_string(),
+            reason: format!("unknown artifact kind (expected {})", Self::names()),
+        })
     }
 }
 
@@ -105,34 +82,18 @@ pub enum LineageRole {
     DerivedFrom,
 }
 
+crate::string_enum!(LineageRole {
+    TrainedAgainst => "trained_against",
+    FrozenCore => "frozen_core",
+    FromCheckpoint => "from_checkpoint",
+    InitialisedFrom => "initialised_from",
+    DerivedFrom => "derived_from",
+});
+
 impl LineageRole {
-    pub const ALL: [LineageRole; 5] = [
-        Self::TrainedAgainst,
-        Self::FrozenCore,
-        Self::FromCheckpoint,
-        Self::InitialisedFrom,
-        Self::DerivedFrom,
-    ];
-
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::TrainedAgainst => "trained_against",
-            Self::FrozenCore => "frozen_core",
-            Self::FromCheckpoint => "from_checkpoint",
-            Self::InitialisedFrom => "initialised_from",
-            Self::DerivedFrom => "derived_from",
-        }
-    }
-
     /// Roles that name the core a version must be loaded with.
     pub fn is_core_role(self) -> bool {
         matches!(self, Self::TrainedAgainst | Self::FrozenCore)
-    }
-}
-
-impl fmt::Display for LineageRole {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.pad(self.as_str())
     }
 }
 
@@ -140,16 +101,10 @@ impl FromStr for LineageRole {
     type Err = RefError;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Self::ALL
-            .into_iter()
-            .find(|k| k.as_str() == s)
-            .ok_or_else(|| RefError {
-                input: s.to_string(),
-                reason:
-                    "unknown lineage role (expected trained_against, frozen_core, from_checkpoint, \
-                     initialised_from or derived_from)"
-                        .into(),
-            })
+        Self::from_name(s).ok_or_else(|| RefError {
+            input: s.to_string(),
+            reason: format!("unknown lineage role (expected {})", Self::names()),
+        })
     }
 }
 
@@ -565,25 +520,15 @@ pub enum ErrorCode {
     Internal,
 }
 
-impl ErrorCode {
-    pub fn as_str(self) -> &'static str {
-        match self {
-            Self::NotFound => "not_found",
-            Self::BadRequest => "bad_request",
-            Self::TooLarge => "too_large",
-            Self::WrongVersion => "wrong_version",
-            Self::Integrity => "integrity",
-            Self::Conflict => "conflict",
-            Self::Internal => "internal",
-        }
-    }
-}
-
-impl fmt::Display for ErrorCode {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.pad(self.as_str())
-    }
-}
+crate::string_enum!(ErrorCode {
+    NotFound => "not_found",
+    BadRequest => "bad_request",
+    TooLarge => "too_large",
+    WrongVersion => "wrong_version",
+    Integrity => "integrity",
+    Conflict => "conflict",
+    Internal => "internal",
+});
 
 /// Error reply of every registry operation (sent with Zenoh `reply_err`).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -608,6 +553,38 @@ impl ErrorReply {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn enum_names_are_their_serde_names_and_parse_back() {
+        fn check<T>(all: &[T], as_str: fn(&T) -> &'static str)
+        where
+            T: Serialize + serde::de::DeserializeOwned + PartialEq + std::fmt::Debug,
+        {
+            for v in all {
+                let json = serde_json::to_string(v).unwrap();
+                assert_eq!(json, format!("\"{}\"", as_str(v)));
+                assert_eq!(&serde_json::from_str::<T>(&json).unwrap(), v);
+            }
+        }
+        check(&ArtifactKind::ALL, |k| k.as_str());
+        check(&LineageRole::ALL, |r| r.as_str());
+        check(&ErrorCode::ALL, |c| c.as_str());
+        for k in ArtifactKind::ALL {
+            assert_eq!(k.as_str().parse::<ArtifactKind>(), Ok(k));
+        }
+        let err = "cores".parse::<ArtifactKind>().unwrap_err();
+        assert!(
+            err.reason
+                .contains("expected core, adapter, mlp, checkpoint, deploy or robot"),
+            "{}",
+            err.reason
+        );
+        assert_eq!(
+            format!("{:>6}", ArtifactKind::Mlp),
+            "   mlp",
+            "Display pads"
+        );
+    }
 
     #[test]
     fn refs_parse_versions_and_aliases() {

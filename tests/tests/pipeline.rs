@@ -23,7 +23,7 @@ fn one_iteration_from_simulator_to_updated_policy() {
     policy_config.encoder_hidden = vec![32];
     policy_config.core_hidden = vec![32];
     policy_config.critic_hidden = vec![32];
-    let spec = l3p_policy::RobotSpec {
+    let spec = l3p_policy::PolicyRobot {
         name: "a1".into(),
         obs_dim,
         action_dim,
