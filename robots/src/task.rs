@@ -1379,6 +1379,21 @@ mod tests {
     }
 
     /// A freshly reset env commanded to walk forward at 0.5 m/s for 10 s.
+    /// A1 on flat ground, blind, with the 2 Hz trot clock and observation noise off; `set` adjusts
+    /// the config (e.g. a reward weight) before it is resolved.
+    fn clocked_flat_task(set: impl FnOnce(&mut EnvConfig)) -> (Task, Terrain) {
+        let mut cfg = EnvConfig::default();
+        cfg.terrain.preset = TerrainPreset::Flat;
+        cfg.height_scan = false;
+        cfg.gait_clock_hz = 2.0;
+        set(&mut cfg);
+        let spec = cfg.resolve("a1").unwrap();
+        let terrain = Terrain::generate(&spec.terrain).unwrap();
+        let mut task = Task::new(spec, a1_params()).unwrap();
+        task.spec.noise.enabled = false;
+        (task, terrain)
+    }
+
     fn commanded_half_speed(task: &Task, st: &SimState, rng: &mut StdRng) -> TaskEnvState {
         let mut env = TaskEnvState::new();
         task.reset_env(&mut env, st, [0.0; 3], rng);
@@ -1451,16 +1466,8 @@ mod tests {
         assert_eq!(gait_clock_match(&[40.0, 0.0, 40.0, 0.0], 1.0, 0.1), 0.5);
         assert_eq!(gait_clock_match(&[40.0; 4], 1.0, 0.6), 0.5);
 
-        let mut cfg = EnvConfig::default();
-        cfg.terrain.preset = TerrainPreset::Flat;
-        cfg.height_scan = false;
-        cfg.gait_clock_hz = 2.0;
-        cfg.rewards.gait_clock = Some(0.8);
-        let spec = cfg.resolve("a1").unwrap();
-        assert_eq!(spec.obs_dim, PROPRIO_OBS + GAIT_CLOCK_OBS);
-        let terrain = Terrain::generate(&spec.terrain).unwrap();
-        let mut task = Task::new(spec, a1_params()).unwrap();
-        task.spec.noise.enabled = false;
+        let (task, terrain) = clocked_flat_task(|cfg| cfg.rewards.gait_clock = Some(0.8));
+        assert_eq!(task.spec.obs_dim, PROPRIO_OBS + GAIT_CLOCK_OBS);
         let mut rng = StdRng::seed_from_u64(3);
         let mut st = standing_state();
         let mut env = commanded_half_speed(&task, &st, &mut rng);
@@ -1498,15 +1505,7 @@ mod tests {
         let h = gait_clock_swing_height(0.1, 0.08);
         assert!((h[1] - 0.08 * (0.2 * std::f32::consts::PI).sin()).abs() < 1e-7);
 
-        let mut cfg = EnvConfig::default();
-        cfg.terrain.preset = TerrainPreset::Flat;
-        cfg.height_scan = false;
-        cfg.gait_clock_hz = 2.0;
-        cfg.rewards.feet_clearance = Some(-30.0);
-        let spec = cfg.resolve("a1").unwrap();
-        let terrain = Terrain::generate(&spec.terrain).unwrap();
-        let mut task = Task::new(spec, a1_params()).unwrap();
-        task.spec.noise.enabled = false;
+        let (task, terrain) = clocked_flat_task(|cfg| cfg.rewards.feet_clearance = Some(-30.0));
         let mut rng = StdRng::seed_from_u64(3);
         let mut st = standing_state();
         let mut env = commanded_half_speed(&task, &st, &mut rng);
