@@ -8,7 +8,8 @@ use common::*;
 use l3p_learner::ppo::{approx_kl, surrogate_loss, value_loss};
 use l3p_learner::*;
 use l3p_policy::{
-    PolicyConfig, PolicyRobot, RecoveryConfig, core_sha256, cpu_device, tensor_to_vec, train_device,
+    PolicyConfig, PolicyModel, PolicyRobot, RecoveryConfig, core_sha256, cpu_device, tensor_to_vec,
+    train_device,
 };
 use rand::SeedableRng;
 use rand::rngs::StdRng;
@@ -35,6 +36,45 @@ fn small_config() -> PolicyConfig {
         },
         ..Default::default()
     }
+}
+
+/// A fresh `mode` model of [`small_config`] for one robot with the point mass's dimensions.
+fn fresh_model(mode: Mode, robot: &str) -> PolicyModel {
+    init_model(
+        mode,
+        small_config(),
+        vec![PolicyRobot::new(robot, OBS, ACT)],
+        None,
+        TransferHeads::Fresh,
+        &train_device(),
+    )
+    .unwrap()
+}
+
+/// A `mode` model of [`small_config`] for `robot`, initialised from the checkpoint at `path`.
+fn transferred_model(
+    mode: Mode,
+    robot: &str,
+    path: &std::path::Path,
+    heads: TransferHeads,
+) -> Result<PolicyModel, LearnerError> {
+    init_model(
+        mode,
+        small_config(),
+        vec![PolicyRobot::new(robot, OBS, ACT)],
+        Some(path),
+        heads,
+        &train_device(),
+    )
+}
+
+/// PPO in `mode` with rsl_rl's defaults around `model`.
+fn ppo_for(mode: Mode, model: PolicyModel) -> Ppo {
+    let cfg = PpoConfig {
+        mode,
+        ..Default::default()
+    };
+    Ppo::new(cfg, model, train_device()).unwrap()
 }
 
 #[test]
@@ -152,42 +192,15 @@ fn head_bytes(model: &l3p_policy::PolicyModel) -> Vec<f32> {
 
 #[test]
 fn l3p_transfer_keeps_the_core_bit_identical_and_trains_adapters() {
-    let device = train_device();
     // "Pretrain" on one robot, save, transfer to another robot with a frozen core.
-    let src = init_model(
-        Mode::L3p,
-        small_config(),
-        vec![PolicyRobot::new("a1", OBS, ACT)],
-        None,
-        TransferHeads::Fresh,
-        &device,
-    )
-    .unwrap();
+    let src = fresh_model(Mode::L3p, "a1");
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("a1.ckpt");
-    Ppo::new(
-        PpoConfig {
-            mode: Mode::L3p,
-            ..Default::default()
-        },
-        src,
-        device.clone(),
-    )
-    .unwrap()
-    .save(&path)
-    .unwrap();
-    let model = init_model(
-        Mode::L3pTransfer,
-        small_config(),
-        vec![PolicyRobot::new("pm", OBS, ACT)],
-        Some(&path),
-        TransferHeads::Fresh,
-        &device,
-    )
-    .unwrap();
+    ppo_for(Mode::L3p, src).save(&path).unwrap();
+    let model = transferred_model(Mode::L3pTransfer, "pm", &path, TransferHeads::Fresh).unwrap();
     let core_before = core_sha256(&model.net).unwrap();
     let ck_core = core_sha256(
-        &l3p_policy::load_checkpoint(&path, &device)
+        &l3p_policy::load_checkpoint(&path, &train_device())
             .unwrap()
             .model
             .net,
@@ -198,15 +211,7 @@ fn l3p_transfer_keeps_the_core_bit_identical_and_trains_adapters() {
         "the core is loaded from the checkpoint"
     );
     let heads_before = head_bytes(&model);
-    let mut ppo = Ppo::new(
-        PpoConfig {
-            mode: Mode::L3pTransfer,
-            ..Default::default()
-        },
-        model,
-        device,
-    )
-    .unwrap();
+    let mut ppo = ppo_for(Mode::L3pTransfer, model);
     let mut env = PointMass::new(32, 1);
     let mut rng = StdRng::seed_from_u64(2);
     for _ in 0..3 {
@@ -230,24 +235,12 @@ fn l3p_transfer_keeps_the_core_bit_identical_and_trains_adapters() {
 
 #[test]
 fn l3p_transfer_with_prototype_heads_starts_as_the_source_policy() {
-    let device = train_device();
-    let src = init_model(
-        Mode::L3p,
-        small_config(),
-        vec![PolicyRobot::new("a1", OBS, ACT)],
-        None,
-        TransferHeads::Fresh,
-        &device,
-    )
-    .unwrap();
+    let src = fresh_model(Mode::L3p, "a1");
     let obs: Vec<f32> = (0..2 * OBS).map(|i| (i as f32 * 0.37).sin()).collect();
     let want = src.act_mean_host(0, &obs).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("a1.ckpt");
-    Ppo::new(PpoConfig::default(), src, device.clone())
-        .unwrap()
-        .save(&path)
-        .unwrap();
+    ppo_for(Mode::L3p, src).save(&path).unwrap();
     let load = |heads, robot: PolicyRobot| {
         init_model(
             Mode::L3pTransfer,
@@ -255,7 +248,7 @@ fn l3p_transfer_with_prototype_heads_starts_as_the_source_policy() {
             vec![robot],
             Some(&path),
             heads,
-            &device,
+            &train_device(),
         )
     };
     let warm = load(TransferHeads::Prototype, PolicyRobot::new("go1", OBS, ACT)).unwrap();
@@ -290,26 +283,9 @@ fn l3p_transfer_with_prototype_heads_starts_as_the_source_policy() {
 
 #[test]
 fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
-    let device = train_device();
-    let model = init_model(
-        Mode::L3p,
-        small_config(),
-        vec![PolicyRobot::new("pm", OBS, ACT)],
-        None,
-        TransferHeads::Fresh,
-        &device,
-    )
-    .unwrap();
+    let model = fresh_model(Mode::L3p, "pm");
     let before = core_sha256(&model.net).unwrap();
-    let mut ppo = Ppo::new(
-        PpoConfig {
-            mode: Mode::L3p,
-            ..Default::default()
-        },
-        model,
-        device.clone(),
-    )
-    .unwrap();
+    let mut ppo = ppo_for(Mode::L3p, model);
     let mut env = PointMass::new(32, 1);
     let mut rng = StdRng::seed_from_u64(2);
     let m = ppo
@@ -318,52 +294,16 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
     assert_ne!(core_sha256(&ppo.model().net).unwrap(), before);
     assert!(m.rec_obs_loss > 0.0 && m.rec_act_loss > 0.0 && m.recon_mse.is_finite());
 
-    let mlp = init_model(
-        Mode::Mlp,
-        small_config(),
-        vec![PolicyRobot::new("a1", OBS, ACT)],
-        None,
-        TransferHeads::Fresh,
-        &device,
-    )
-    .unwrap();
+    let mlp = fresh_model(Mode::Mlp, "a1");
     let obs: Vec<f32> = (0..8).map(|i| i as f32 * 0.1).collect();
     let want = mlp.act_mean_host(0, &obs).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("mlp.ckpt");
-    Ppo::new(
-        PpoConfig {
-            mode: Mode::Mlp,
-            ..Default::default()
-        },
-        mlp,
-        device.clone(),
-    )
-    .unwrap()
-    .save(&path)
-    .unwrap();
-    let go1 = init_model(
-        Mode::MlpTransfer,
-        small_config(),
-        vec![PolicyRobot::new("go1", OBS, ACT)],
-        Some(&path),
-        TransferHeads::Fresh,
-        &device,
-    )
-    .unwrap();
+    ppo_for(Mode::Mlp, mlp).save(&path).unwrap();
+    let go1 = transferred_model(Mode::MlpTransfer, "go1", &path, TransferHeads::Fresh).unwrap();
     assert_eq!(go1.act_mean_host(0, &obs).unwrap(), want);
     // Wrong combinations are errors with hints.
-    assert!(
-        init_model(
-            Mode::L3pTransfer,
-            small_config(),
-            vec![PolicyRobot::new("go1", OBS, ACT)],
-            Some(&path),
-            TransferHeads::Fresh,
-            &device
-        )
-        .is_err()
-    );
+    assert!(transferred_model(Mode::L3pTransfer, "go1", &path, TransferHeads::Fresh).is_err());
     assert!(
         init_model(
             Mode::MlpTransfer,
@@ -371,7 +311,7 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
             vec![PolicyRobot::new("go1", OBS, ACT)],
             None,
             TransferHeads::Fresh,
-            &device
+            &train_device()
         )
         .unwrap_err()
         .to_string()
@@ -381,25 +321,8 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
 
 #[test]
 fn checkpoint_resume_gives_identical_actions_and_state() {
-    let device = train_device();
-    let model = init_model(
-        Mode::L3p,
-        small_config(),
-        vec![PolicyRobot::new("pm", OBS, ACT)],
-        None,
-        TransferHeads::Fresh,
-        &device,
-    )
-    .unwrap();
-    let mut ppo = Ppo::new(
-        PpoConfig {
-            mode: Mode::L3p,
-            ..Default::default()
-        },
-        model,
-        device.clone(),
-    )
-    .unwrap();
+    let model = fresh_model(Mode::L3p, "pm");
+    let mut ppo = ppo_for(Mode::L3p, model);
     let mut env = PointMass::new(32, 1);
     let mut rng = StdRng::seed_from_u64(2);
     ppo.update(&collect(ppo.model(), &mut env, 8, &mut rng))
@@ -411,7 +334,7 @@ fn checkpoint_resume_gives_identical_actions_and_state() {
             ..Default::default()
         },
         &bytes,
-        device,
+        train_device(),
     )
     .unwrap();
     assert_eq!(resumed.iteration(), 1);
@@ -425,21 +348,7 @@ fn checkpoint_resume_gives_identical_actions_and_state() {
 
 /// PPO with rsl_rl's defaults on a small MLP for the one robot `pm`.
 fn mlp_ppo() -> Ppo {
-    let device = train_device();
-    let model = init_model(
-        Mode::Mlp,
-        small_config(),
-        vec![PolicyRobot::new("pm", OBS, ACT)],
-        None,
-        TransferHeads::Fresh,
-        &device,
-    )
-    .unwrap();
-    let cfg = PpoConfig {
-        mode: Mode::Mlp,
-        ..Default::default()
-    };
-    Ppo::new(cfg, model, device).unwrap()
+    ppo_for(Mode::Mlp, fresh_model(Mode::Mlp, "pm"))
 }
 
 #[test]

@@ -1,0 +1,392 @@
+use super::*;
+
+fn spec(text: &str) -> ExperimentSpec {
+    let spec: ExperimentSpec = toml::from_str(text).unwrap();
+    spec
+}
+
+const MICRO: &str = r#"
+[experiment]
+name = "micro"
+base_config = "unused.toml"
+data_dir = "/tmp/exp"
+seeds = [1, 2]
+envs = 8
+[pretrain]
+robots = ["a1"]
+methods = ["mlp", "l3p"]
+iterations = 30
+[targets]
+robots = ["go1", "anymal_c"]
+methods = ["l3p", "l3p-transfer", "mlp-transfer"]
+iterations = 20
+terrain = "flat"
+"#;
+
+fn base() -> Config {
+    let mut c = Config::default();
+    c.actors = vec![ActorSpec {
+        robot: "a1".into(),
+        envs: 64,
+        threads: 2,
+    }];
+    c
+}
+
+#[test]
+fn plan_expands_pretraining_then_targets_with_their_dependencies() {
+    let arms = plan(&spec(MICRO), &base()).unwrap();
+    let names: Vec<&str> = arms.iter().map(|a| a.name.as_str()).collect();
+    assert_eq!(
+        &names[..4],
+        [
+            "pretrain-mlp-s1",
+            "pretrain-l3p-s1",
+            "pretrain-mlp-s2",
+            "pretrain-l3p-s2"
+        ]
+    );
+    assert_eq!(arms.len(), 4 + 2 * 3 * 2);
+    let t = arms
+        .iter()
+        .find(|a| a.name == "anymal-c-l3p-transfer-s2")
+        .unwrap();
+    assert_eq!(t.stage, Stage::Target);
+    assert_eq!(t.depends_on.as_deref(), Some("pretrain-l3p-s2"));
+    assert_eq!(t.config.ppo.mode, Mode::L3pTransfer);
+    assert_eq!((t.config.run.seed, t.config.ppo.seed), (2, 2));
+    assert_eq!(t.config.learner.max_iterations, 20);
+    assert_eq!(t.config.actors[0].robot, "anymal_c");
+    assert_eq!(
+        (t.config.actors[0].envs, t.config.actors[0].threads),
+        (8, 2)
+    );
+    assert_eq!(
+        t.config.learner.init_from.as_deref(),
+        Some(Path::new(
+            "/tmp/exp/micro/pretrain-l3p-s2/pretrain-l3p-s2/checkpoints/latest.ckpt"
+        ))
+    );
+    let m = arms
+        .iter()
+        .find(|a| a.name == "go1-mlp-transfer-s1")
+        .unwrap();
+    assert_eq!(m.depends_on.as_deref(), Some("pretrain-mlp-s1"));
+    let scratch = arms.iter().find(|a| a.name == "go1-l3p-s1").unwrap();
+    assert_eq!(scratch.depends_on, None);
+    assert_eq!(scratch.config.learner.init_from, None);
+    let p = &arms[0];
+    assert_eq!((p.stage, p.iterations), (Stage::Pretrain, 30));
+    assert_eq!(
+        p.config.run.data_dir,
+        Path::new("/tmp/exp/micro/pretrain-mlp-s1")
+    );
+    // Every arm's config survives the file it is written to.
+    for arm in &arms {
+        let text = toml::to_string(&arm.config).unwrap();
+        let back: Config = toml::from_str(&text).unwrap();
+        assert_eq!(back, arm.config, "{}", arm.name);
+    }
+}
+
+const VARIANTS: &str = r#"
+[[variants]]
+name = "warm"
+methods = ["l3p-transfer"]
+robots = ["go1"]
+transfer_heads = "prototype"
+
+[[variants]]
+name = "joint"
+methods = ["l3p-transfer", "mlp-transfer"]
+robots = ["anymal_c"]
+pretrain_robots = ["a1", "go1"]
+envs = 4
+
+[[variants]]
+name = "dz2"
+pretrain_methods = ["l3p"]
+d_z = 2
+"#;
+
+#[test]
+fn variants_add_their_own_arms_and_pretrain_only_when_they_change_the_core() {
+    let text = format!("{MICRO}{VARIANTS}");
+    let arms = plan(&spec(&text), &base()).unwrap();
+    let main = plan(&spec(MICRO), &base()).unwrap();
+    // The main grid comes first and is untouched; each variant's arms follow in file order.
+    assert_eq!(&arms[..main.len()], &main[..]);
+    // warm: 1 robot × 1 method × 2 seeds; joint: 2 pretraining methods × 2 seeds + 1 robot
+    // × 2 methods × 2 seeds; dz2: 1 pretraining method × 2 seeds.
+    assert_eq!(arms.len(), main.len() + 2 + (4 + 4) + 2);
+    let variants: Vec<&str> = arms[main.len()..]
+        .iter()
+        .map(|a| a.variant.as_deref().unwrap())
+        .collect();
+    let mut order = variants.clone();
+    order.dedup();
+    assert_eq!(order, ["warm", "joint", "dz2"]);
+    let joint: Vec<Stage> = arms[main.len()..]
+        .iter()
+        .filter(|a| a.variant.as_deref() == Some("joint"))
+        .map(|a| a.stage)
+        .collect();
+    assert!(joint.is_sorted_by_key(|s| *s == Stage::Target), "{joint:?}");
+
+    let warm = arms
+        .iter()
+        .find(|a| a.name == "go1-l3p-transfer-warm-s2")
+        .unwrap();
+    assert_eq!(warm.variant.as_deref(), Some("warm"));
+    assert_eq!(warm.depends_on.as_deref(), Some("pretrain-l3p-s2"));
+    assert_eq!(warm.config.ppo.transfer_heads, TransferHeads::Prototype);
+    let plain = arms
+        .iter()
+        .find(|a| a.name == "go1-l3p-transfer-s2")
+        .unwrap();
+    assert_eq!(plain.config.ppo.transfer_heads, TransferHeads::Fresh);
+
+    let joint = arms
+        .iter()
+        .find(|a| a.name == "pretrain-joint-mlp-s1")
+        .unwrap();
+    assert_eq!(joint.robots, ["a1", "go1"]);
+    assert_eq!(joint.config.actors.len(), 2);
+    assert!(joint.config.actors.iter().all(|a| a.envs == 4));
+    let t = arms
+        .iter()
+        .find(|a| a.name == "anymal-c-mlp-transfer-joint-s1")
+        .unwrap();
+    assert_eq!(t.depends_on.as_deref(), Some("pretrain-joint-mlp-s1"));
+    // The variant's envs size its pretraining only: its target arms compare with the
+    // from-scratch arms at the experiment's envs.
+    assert_eq!(t.config.actors[0].envs, 8);
+
+    let dz = arms
+        .iter()
+        .find(|a| a.name == "pretrain-dz2-l3p-s2")
+        .unwrap();
+    assert_eq!((dz.config.model.d_z, dz.config.model.d_h), (2, 64));
+    assert_eq!(dz.robots, ["a1"]);
+    assert!(
+        !arms
+            .iter()
+            .any(|a| a.name.contains("dz2") && a.stage == Stage::Target)
+    );
+}
+
+#[test]
+fn bad_variants_are_refused() {
+    let cases = [
+        (
+            VARIANTS.replace(r#"name = "joint""#, r#"name = "warm""#),
+            "used twice",
+        ),
+        (
+            VARIANTS.replace(r#"robots = ["go1"]"#, r#"robots = ["go7"]"#),
+            "variants.warm",
+        ),
+        (
+            VARIANTS.replace("d_z = 2", "d_z = 0"),
+            "variants.dz2: d_h, d_z and envs",
+        ),
+        (
+            VARIANTS
+                .replace(
+                    r#"pretrain_methods = ["l3p"]"#,
+                    r#"pretrain_methods = ["mlp"]"#,
+                )
+                .replace("d_z = 2", "d_z = 2\nmethods = [\"l3p-transfer\"]"),
+            "its pretraining has no l3p",
+        ),
+        (
+            VARIANTS.replace(r#"methods = ["l3p-transfer"]"#, "methods = []"),
+            "variants.warm: no arms",
+        ),
+    ];
+    for (variants, want) in cases {
+        let err = spec(&format!("{MICRO}{variants}")).validate().unwrap_err();
+        assert!(err.contains(want), "{want}: {err}");
+    }
+    // A variant whose arm names collide with the main grid's.
+    let clash = format!(
+        "{MICRO}\n[[variants]]\nname = \"transfer\"\nmethods = [\"l3p\"]\nd_h = 8\npretrain_methods = [\"l3p\"]\n"
+    );
+    let err = plan(&spec(&clash), &base()).unwrap_err().to_string();
+    assert!(
+        err.contains("two arms are named") && err.contains("-l3p-transfer-s1"),
+        "{err}"
+    );
+}
+
+#[test]
+fn bad_specs_are_refused_with_the_key_named() {
+    let cases = [
+        (MICRO.replace("seeds = [1, 2]", "seeds = [1, 1]"), "repeats"),
+        (
+            MICRO.replace("seeds = [1, 2]", "seeds = []"),
+            "experiment.seeds",
+        ),
+        (
+            MICRO.replace(r#"methods = ["mlp", "l3p"]"#, r#"methods = ["l3p"]"#),
+            "pretrain.methods has no mlp",
+        ),
+        (
+            MICRO.replace(
+                r#"methods = ["mlp", "l3p"]"#,
+                r#"methods = ["l3p-transfer"]"#,
+            ),
+            "not a from-scratch method",
+        ),
+        (MICRO.replace(r#""go1""#, r#""go7""#), "targets.robots"),
+        (
+            MICRO.replace("iterations = 20", "iterations = 0"),
+            "targets.iterations",
+        ),
+        (
+            MICRO.replace(r#"name = "micro""#, r#"name = "a/b""#),
+            "experiment.name",
+        ),
+    ];
+    for (text, want) in cases {
+        let err = spec(&text).validate().unwrap_err();
+        assert!(err.contains(want), "{want}: {err}");
+    }
+    assert!(toml::from_str::<ExperimentSpec>(&MICRO.replace("envs = 8", "envz = 8")).is_err());
+}
+
+#[test]
+fn mean_std_and_bands_over_seeds() {
+    assert_eq!(mean_std(&[]), None);
+    assert_eq!(mean_std(&[2.0]), Some((2.0, 0.0)));
+    let (m, s) = mean_std(&[1.0, 2.0, 3.0, f64::NAN]).unwrap();
+    assert!((m - 2.0).abs() < 1e-12 && (s - 1.0).abs() < 1e-12);
+    let b = band(&[
+        vec![(1.0, 1.0), (2.0, 2.0), (3.0, 5.0)],
+        vec![(1.0, 3.0), (2.0, 4.0)],
+    ]);
+    // Iteration 3 is left out: only one seed reached it.
+    assert_eq!(b, vec![(1.0, 2.0, 1.0, 3.0), (2.0, 3.0, 2.0, 4.0)]);
+}
+
+fn result(robot: &str, method: Mode, seed: u64, reward_85: Option<u64>, reward: f64) -> ArmResult {
+    ArmResult {
+        robot: robot.into(),
+        method,
+        variant: None,
+        seed,
+        row: ReportRow {
+            iterations: 100,
+            level_85: None,
+            level_95: None,
+            reward_85,
+            reward_95: reward_85.map(|v| v + 10),
+            final_level: 0.0,
+            final_reward: reward,
+            lin_vel_error: 0.1,
+            yaw_rate_error: 0.2,
+        },
+        wall_seconds: 120.0,
+        eval_lin_vel_error: 0.15,
+        eval_yaw_rate_error: 0.25,
+        eval_return: reward,
+        zero_shot_return: (method == Mode::L3pTransfer).then_some(1.5),
+        terrain_levels: false,
+        terrain_reach: BTreeMap::new(),
+    }
+}
+
+#[test]
+fn the_table_has_one_row_per_robot_and_method_with_the_spread_over_seeds() {
+    let table = markdown_table(&[
+        result("go1", Mode::L3pTransfer, 1, Some(40), 20.0),
+        result("go1", Mode::L3pTransfer, 2, Some(60), 22.0),
+        result("go1", Mode::Mlp, 1, Some(100), 18.0),
+        result("go1", Mode::Mlp, 2, None, 16.0),
+    ]);
+    let rows: Vec<&str> = table.lines().filter(|l| l.starts_with("| go1")).collect();
+    assert_eq!(rows.len(), 2, "{table}");
+    let transfer = rows.iter().find(|r| r.contains("l3p-transfer")).unwrap();
+    // Reward 85%: mean 50 ± std 14 (sample std of 40, 60); final reward 21.00 ± 1.41; the
+    // paper's Go1 L3P-Transfer reward convergence 181 / 234.
+    assert!(transfer.contains("| 50 ± 14 |"), "{transfer}");
+    assert!(transfer.contains("| 21.00 ± 1.41 |"), "{transfer}");
+    assert!(transfer.contains("| 1.50 ± 0.00 |"), "{transfer}");
+    assert!(transfer.contains("| 181 / 234 |"), "{transfer}");
+    let mlp = rows.iter().find(|r| r.contains("| mlp |")).unwrap();
+    assert!(mlp.contains("100 ± 0 (1/2 reached)"), "{mlp}");
+    assert!(mlp.contains("| 2.0 ± 0.0 |"), "{mlp}"); // wall minutes
+    // On flat ground the level columns are empty; a transfer arm's reward is compared with
+    // the same architecture from scratch (no l3p scratch arm here).
+    assert!(mlp.contains("| — (flat) | — (flat) | — (flat) |"), "{mlp}");
+    assert!(transfer.contains("| 21.00 ± 1.41 | — |"), "{transfer}");
+    let with_scratch = markdown_table(&[
+        result("go1", Mode::L3pTransfer, 1, Some(40), 21.0),
+        result("go1", Mode::L3p, 1, Some(90), 14.0),
+    ]);
+    assert!(
+        with_scratch.contains("| 21.00 ± 0.00 | 150% |"),
+        "{with_scratch}"
+    );
+    // A variant's transfer row: its own row, compared with the main grid's scratch arms, and
+    // no paper numbers (the paper has no such arm).
+    let mut warm = result("go1", Mode::L3pTransfer, 1, Some(30), 28.0);
+    warm.variant = Some("warm".into());
+    let with_variant = markdown_table(&[
+        warm,
+        result("go1", Mode::L3pTransfer, 1, Some(40), 21.0),
+        result("go1", Mode::L3p, 1, Some(90), 14.0),
+    ]);
+    let row = with_variant
+        .lines()
+        .find(|l| l.contains("l3p-transfer [warm]"))
+        .unwrap();
+    assert!(row.contains("| 28.00 ± 0.00 | 200% |"), "{row}");
+    assert!(row.ends_with("| — |"), "{row}");
+    assert_eq!(
+        with_variant
+            .lines()
+            .filter(|l| l.starts_with("| go1"))
+            .count(),
+        3
+    );
+}
+
+#[test]
+fn terrain_reach_is_tabled_per_type_and_evaluated_on_one_type_with_the_curriculum() {
+    let mut a = result("go1", Mode::L3pTransfer, 1, Some(40), 20.0);
+    a.terrain_reach = [("flat".to_string(), 6.0), ("boxes".to_string(), 2.0)].into();
+    let mut b = result("go1", Mode::L3pTransfer, 2, Some(40), 20.0);
+    b.terrain_reach = [("flat".to_string(), 8.0)].into();
+    let plain = result("go1", Mode::Mlp, 1, Some(40), 20.0);
+    let types = [
+        TerrainType::Flat,
+        TerrainType::Boxes,
+        TerrainType::PyramidSlope,
+    ];
+    let table = terrain_reach_table(&[a, b, plain], &types);
+    assert!(table.starts_with("| robot | method | seeds | flat | boxes | pyramid_slope |"));
+    // Mean ± sample std over the seeds that have the type; none: a dash. Arms without terrain
+    // evaluations get no row.
+    assert!(
+        table.contains("| go1 | l3p-transfer | 2 | 7.00 ± 1.41 | 2.00 ± 0.00 | — |"),
+        "{table}"
+    );
+    assert!(!table.contains("| mlp |"), "{table}");
+
+    let mut env = l3p_robots::config::EnvConfig::default();
+    env.terrain.preset = TerrainPreset::SimpleRough;
+    let one = single_terrain_env(&env, TerrainType::Boxes);
+    assert_eq!(one.terrain.preset, TerrainPreset::Curriculum);
+    assert_eq!(one.terrain.curriculum, Some(true));
+    let spec = one.terrain.resolve("go1").unwrap();
+    assert_eq!(
+        spec.proportions,
+        l3p_robots::terrain::TypeProportions::only(TerrainType::Boxes)
+    );
+    env.terrain.preset = TerrainPreset::Paper;
+    assert_eq!(
+        single_terrain_env(&env, TerrainType::Flat).terrain.preset,
+        TerrainPreset::Paper
+    );
+}
