@@ -149,20 +149,18 @@ impl RewardScales {
     pub fn for_robot(robot: &str, rough: bool) -> RewardScales {
         let mut s = RewardScales::default();
         match (RobotFamily::from_name(robot), rough) {
-            (RobotFamily::Unitree, true) => {
+            (RobotFamily::Unitree, rough) => {
+                // IsaacLab's flat Unitree configs inherit the rough ones and change two weights.
                 s.track_lin_vel_xy_exp = 1.5;
                 s.track_ang_vel_z_exp = 0.75;
                 s.dof_torques_l2 = -2.0e-4;
-                s.feet_air_time = 0.01;
                 s.undesired_contacts = 0.0;
-            }
-            (RobotFamily::Unitree, false) => {
-                s.track_lin_vel_xy_exp = 1.5;
-                s.track_ang_vel_z_exp = 0.75;
-                s.dof_torques_l2 = -2.0e-4;
-                s.feet_air_time = 0.25;
-                s.undesired_contacts = 0.0;
-                s.flat_orientation_l2 = -2.5;
+                if rough {
+                    s.feet_air_time = 0.01;
+                } else {
+                    s.feet_air_time = 0.25;
+                    s.flat_orientation_l2 = -2.5;
+                }
             }
             (_, false) => {
                 s.flat_orientation_l2 = -5.0;
