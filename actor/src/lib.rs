@@ -163,7 +163,7 @@ impl RolloutEnv for SimEnv {
     fn reward_term_names(&self) -> Vec<String> {
         l3p_robots::task::RewardTerm::ALL
             .iter()
-            .map(|t| t.name().to_string())
+            .map(|t| t.as_str().to_string())
             .collect()
     }
     fn take_stage_seconds(&mut self) -> Vec<(&'static str, f64)> {

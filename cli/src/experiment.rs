@@ -832,7 +832,7 @@ pub fn terrain_reach_table(results: &[ArmResult], types: &[TerrainType]) -> Stri
     }
     let mut out = String::from("| robot | method | seeds |");
     for t in types {
-        out.push_str(&format!(" {} |", t.name()));
+        out.push_str(&format!(" {} |", t.as_str()));
     }
     out.push_str("\n|---|---|---|");
     out.push_str(&"---|".repeat(types.len()));
@@ -842,7 +842,7 @@ pub fn terrain_reach_table(results: &[ArmResult], types: &[TerrainType]) -> Stri
         for t in types {
             let v: Vec<f64> = rs
                 .iter()
-                .filter_map(|r| r.terrain_reach.get(t.name()).copied())
+                .filter_map(|r| r.terrain_reach.get(t.as_str()).copied())
                 .collect();
             out.push_str(&match mean_std(&v) {
                 Some((m, sd)) => format!(" {m:.2} ± {sd:.2} |"),

@@ -464,7 +464,7 @@ fn evaluate_terrains(
         .map(|&t| {
             let env = crate::experiment::single_terrain_env(&config.env, t);
             let row = player.play(&env, ev.envs * ev.terrain_rounds, None)?;
-            Ok((t.name().to_string(), row))
+            Ok((t.as_str().to_string(), row))
         })
         .collect()
 }
@@ -604,7 +604,7 @@ fn terrain_reach_section(
             .unwrap_or(5),
         crate::experiment::terrain_reach_table(results, types),
     );
-    let axes: Vec<String> = types.iter().map(|t| t.name().replace('_', " ")).collect();
+    let axes: Vec<String> = types.iter().map(|t| t.as_str().replace('_', " ")).collect();
     let mut robots: Vec<&str> = results
         .iter()
         .filter(|r| !r.terrain_reach.is_empty())
@@ -632,7 +632,7 @@ fn terrain_reach_section(
                     .map(|t| {
                         let v: Vec<f64> = rs
                             .iter()
-                            .filter_map(|r| r.terrain_reach.get(t.name()).copied())
+                            .filter_map(|r| r.terrain_reach.get(t.as_str()).copied())
                             .collect();
                         crate::experiment::mean_std(&v).map_or(f64::NAN, |(m, _)| m)
                     })

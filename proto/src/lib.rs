@@ -8,56 +8,7 @@
 //! [`WIRE_VERSION`]; [`codec`] checks it before decoding the rest.
 //!
 //! Architecture invariants: key expressions are built only by [`keys`]; bytes are produced and parsed
-//! only by [`codec`]; this crate depends on no other project crate.
-
-/// The string names of a fieldless enum, written once as `Variant => "name"` rows: `ALL` (every
-/// variant in order), `as_str`, `from_name`, `names()` ("a, b or c", for error messages) and
-/// `Display`. The enum keeps its own declaration (docs, derives); where it also derives serde, each
-/// user tests that the serde names are these (see `registry`'s tests).
-#[macro_export]
-macro_rules! string_enum {
-    ($ty:ident { $($variant:ident => $name:literal),+ $(,)? }) => {
-        impl $ty {
-            /// Every variant, in declaration order.
-            pub const ALL: [$ty; [$($name),+].len()] = [$($ty::$variant),+];
-
-            /// The variant's name (config, CLI and wire spelling).
-            pub fn as_str(self) -> &'static str {
-                match self {
-                    $($ty::$variant => $name,)+
-                }
-            }
-
-            /// The variant called `name`, if any.
-            pub fn from_name(name: &str) -> Option<Self> {
-                match name {
-                    $($name => Some($ty::$variant),)+
-                    _ => None,
-                }
-            }
-
-            /// Every name, as "a, b or c".
-            pub fn names() -> String {
-                $crate::join_names(&[$($name),+])
-            }
-        }
-
-        impl ::std::fmt::Display for $ty {
-            fn fmt(&self, f: &mut ::std::fmt::Formatter<'_>) -> ::std::fmt::Result {
-                f.pad(self.as_str())
-            }
-        }
-    };
-}
-
-/// `["a", "b", "c"]` → `"a, b or c"` (for [`string_enum!`]'s `names`).
-pub fn join_names(names: &[&str]) -> String {
-    match names {
-        [] => String::new(),
-        [one] => (*one).to_string(),
-        [init @ .., last] => format!("{} or {last}", init.join(", ")),
-    }
-}
+//! only by [`codec`]; this crate depends on no other project crate but the leaf `l3p-names` (enum spellings).
 
 /// `impl WireMessage` for a message struct with a `wire_version` field (defined before the modules
 /// that use it: `macro_rules!` scope is textual).

@@ -46,7 +46,7 @@ pub enum ArtifactKind {
     Robot,
 }
 
-crate::string_enum!(ArtifactKind {
+l3p_names::string_enum!(ArtifactKind {
     Core => "core",
     Adapter => "adapter",
     Mlp => "mlp",
@@ -82,7 +82,7 @@ pub enum LineageRole {
     DerivedFrom,
 }
 
-crate::string_enum!(LineageRole {
+l3p_names::string_enum!(LineageRole {
     TrainedAgainst => "trained_against",
     FrozenCore => "frozen_core",
     FromCheckpoint => "from_checkpoint",
@@ -520,7 +520,7 @@ pub enum ErrorCode {
     Internal,
 }
 
-crate::string_enum!(ErrorCode {
+l3p_names::string_enum!(ErrorCode {
     NotFound => "not_found",
     BadRequest => "bad_request",
     TooLarge => "too_large",

@@ -55,26 +55,12 @@ pub enum LegId {
     RR,
 }
 
-impl LegId {
-    /// The four legs in canonical order.
-    pub const ALL: [LegId; 4] = [LegId::FL, LegId::FR, LegId::RL, LegId::RR];
-
-    /// Short name (`FL`, …).
-    pub fn as_str(self) -> &'static str {
-        match self {
-            LegId::FL => "FL",
-            LegId::FR => "FR",
-            LegId::RL => "RL",
-            LegId::RR => "RR",
-        }
-    }
-}
-
-impl fmt::Display for LegId {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
+l3p_names::string_enum!(LegId {
+    FL => "FL",
+    FR => "FR",
+    RL => "RL",
+    RR => "RR",
+});
 
 /// A joint's role within its leg, canonical order abduction, hip, knee.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -87,32 +73,19 @@ pub enum JointRole {
     Knee,
 }
 
+l3p_names::string_enum!(JointRole {
+    Abduction => "abduction",
+    Hip => "hip",
+    Knee => "knee",
+});
+
 impl JointRole {
-    /// The three roles in chain order.
-    pub const ALL: [JointRole; JOINTS_PER_LEG] =
-        [JointRole::Abduction, JointRole::Hip, JointRole::Knee];
-
-    /// Lower-case name.
-    pub fn as_str(self) -> &'static str {
-        match self {
-            JointRole::Abduction => "abduction",
-            JointRole::Hip => "hip",
-            JointRole::Knee => "knee",
-        }
-    }
-
     /// Canonical axis direction in the trunk frame (+x for abduction, +y otherwise).
     pub fn canonical_axis(self) -> Vec3 {
         match self {
             JointRole::Abduction => Vec3::X,
             JointRole::Hip | JointRole::Knee => Vec3::Y,
         }
-    }
-}
-
-impl fmt::Display for JointRole {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
     }
 }
 

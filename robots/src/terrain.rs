@@ -59,31 +59,18 @@ pub enum TerrainType {
     InvertedPyramidSlope,
 }
 
+// `ALL` is in the order of [`TypeProportions`]; the names are the snake-case serde names (tested).
+l3p_names::string_enum!(TerrainType {
+    Flat => "flat",
+    PyramidStairs => "pyramid_stairs",
+    InvertedPyramidStairs => "inverted_pyramid_stairs",
+    Boxes => "boxes",
+    RandomRough => "random_rough",
+    PyramidSlope => "pyramid_slope",
+    InvertedPyramidSlope => "inverted_pyramid_slope",
+});
+
 impl TerrainType {
-    /// All types, in the order of [`TypeProportions`].
-    pub const ALL: [TerrainType; 7] = [
-        TerrainType::Flat,
-        TerrainType::PyramidStairs,
-        TerrainType::InvertedPyramidStairs,
-        TerrainType::Boxes,
-        TerrainType::RandomRough,
-        TerrainType::PyramidSlope,
-        TerrainType::InvertedPyramidSlope,
-    ];
-
-    /// Snake-case name (for logs and metrics).
-    pub fn name(self) -> &'static str {
-        match self {
-            TerrainType::Flat => "flat",
-            TerrainType::PyramidStairs => "pyramid_stairs",
-            TerrainType::InvertedPyramidStairs => "inverted_pyramid_stairs",
-            TerrainType::Boxes => "boxes",
-            TerrainType::RandomRough => "random_rough",
-            TerrainType::PyramidSlope => "pyramid_slope",
-            TerrainType::InvertedPyramidSlope => "inverted_pyramid_slope",
-        }
-    }
-
     /// Index into [`TerrainType::ALL`].
     pub fn index(self) -> usize {
         self as usize

@@ -10,16 +10,22 @@ use std::path::{Path, PathBuf};
 
 /// Project crate → the project crates its `[dependencies]` may name.
 const ALLOWED: &[(&str, &[&str])] = &[
-    ("l3p-proto", &[]),
+    ("l3p-names", &[]),
+    ("l3p-proto", &["l3p-names"]),
     ("l3p-net", &[]),
     ("l3p-infer", &[]),
-    ("l3p-robots", &["l3p-infer"]),
+    ("l3p-robots", &["l3p-names", "l3p-infer"]),
     ("l3p-policy", &["l3p-infer"]),
     ("l3p-registry-client", &["l3p-proto"]),
     ("l3p-registry", &["l3p-proto", "l3p-registry-client"]),
     (
         "l3p-learner",
-        &["l3p-proto", "l3p-policy", "l3p-registry-client"],
+        &[
+            "l3p-names",
+            "l3p-proto",
+            "l3p-policy",
+            "l3p-registry-client",
+        ],
     ),
     (
         "l3p-actor",

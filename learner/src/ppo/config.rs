@@ -31,7 +31,7 @@ impl Mode {
     }
 }
 
-l3p_proto::string_enum!(Mode {
+l3p_names::string_enum!(Mode {
     Mlp => "mlp",
     L3p => "l3p",
     MlpTransfer => "mlp-transfer",

@@ -21,17 +21,10 @@ macro_rules! reward_terms {
         /// Number of reward terms.
         pub const NUM_REWARD_TERMS: usize = [$(RewardTerm::$variant),*].len();
 
-        impl RewardTerm {
-            /// All terms in order.
-            pub const ALL: [RewardTerm; NUM_REWARD_TERMS] = [$(RewardTerm::$variant),*];
-
-            /// IsaacLab term name (also the `[env.rewards]` key).
-            pub fn name(self) -> &'static str {
-                match self {
-                    $(RewardTerm::$variant => stringify!($field),)*
-                }
-            }
-        }
+        // The IsaacLab term name is the `[env.rewards]` key (`as_str`, `from_name`, `ALL` in order).
+        l3p_names::string_enum!(RewardTerm {
+            $($variant => stringify!($field)),*
+        });
 
         /// Weights of the reward terms: each adds `weight · value · dt` with `dt` the policy
         /// step (0.02 s), like IsaacLab's `RewardManager`. Defaults: IsaacLab 2.1's base

@@ -6,18 +6,18 @@ fn every_reward_term_is_indexed_named_weighted_and_overridable_in_one_order() {
     let named = scales.named();
     for (k, term) in RewardTerm::ALL.iter().enumerate() {
         assert_eq!(*term as usize, k);
-        assert_eq!(term.name(), named[k].0);
+        assert_eq!(term.as_str(), named[k].0);
         // The name is the `[env.rewards]` key and reaches the same weight.
         let overrides: RewardOverrides =
-            toml::from_str(&format!("{} = 123.5", term.name())).unwrap();
+            toml::from_str(&format!("{} = 123.5", term.as_str())).unwrap();
         let mut s = scales.clone();
         overrides.apply(&mut s);
-        assert_eq!(s.named()[k].1, 123.5, "{}", term.name());
+        assert_eq!(s.named()[k].1, 123.5, "{}", term.as_str());
         assert_eq!(
             s.named().iter().filter(|(_, w)| *w == 123.5).count(),
             1,
             "{} set another weight too",
-            term.name()
+            term.as_str()
         );
     }
 }
