@@ -78,7 +78,11 @@ mod tests {
         assert_eq!(Gait::from_name("gallop"), None);
         assert_eq!(Gait::from_name("Trot"), None, "names are case-sensitive");
         assert_eq!(Gait::names(), "trot, pace or bound");
-        assert_eq!(format!("[{:>6}]", Gait::Trot), "[  trot]", "Display honours padding");
+        assert_eq!(
+            format!("[{:>6}]", Gait::Trot),
+            "[  trot]",
+            "Display honours padding"
+        );
     }
 
     #[test]
