@@ -244,3 +244,26 @@ fn paper_preset_scales_rough_with_difficulty() {
         "IsaacLab ignores the difficulty"
     );
 }
+
+#[test]
+fn terrain_type_names_are_the_serde_names_and_the_proportions_keys() {
+    #[derive(serde::Deserialize)]
+    struct One {
+        t: TerrainType,
+    }
+    for (i, t) in TerrainType::ALL.into_iter().enumerate() {
+        assert_eq!(t.index(), i);
+        let parsed: One = toml::from_str(&format!("t = \"{}\"", t.as_str())).unwrap();
+        assert_eq!(parsed.t, t);
+        // Unnamed keys keep IsaacLab's shares, none of which is 1.
+        let proportions: TypeProportions =
+            toml::from_str(&format!("{} = 1.0", t.as_str())).unwrap();
+        assert_eq!(
+            proportions.as_array()[i],
+            1.0,
+            "{t} is the proportions key of its index"
+        );
+    }
+    assert_eq!(TerrainType::from_name("stairs"), None);
+    assert!(TerrainType::names().ends_with("pyramid_slope or inverted_pyramid_slope"));
+}
