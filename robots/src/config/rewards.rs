@@ -18,13 +18,13 @@ macro_rules! reward_terms {
             $($(#[$doc])* $variant,)*
         }
 
-        /// Number of reward terms.
-        pub const NUM_REWARD_TERMS: usize = [$(RewardTerm::$variant),*].len();
-
         // The IsaacLab term name is the `[env.rewards]` key (`as_str`, `from_name`, `ALL` in order).
         l3p_names::string_enum!(RewardTerm {
             $($variant => stringify!($field)),*
         });
+
+        /// Number of reward terms.
+        pub const NUM_REWARD_TERMS: usize = RewardTerm::ALL.len();
 
         /// Weights of the reward terms: each adds `weight · value · dt` with `dt` the policy
         /// step (0.02 s), like IsaacLab's `RewardManager`. Defaults: IsaacLab 2.1's base
