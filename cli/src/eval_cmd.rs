@@ -337,6 +337,10 @@ pub fn format_rows(rows: &[EvalRow]) -> String {
             col(&|r| format!("{:.1}%", 100.0 * r.summary.fall_fraction)),
         ),
         (
+            "  terminations by cause",
+            col(&|r| gait(r, &|g| g.endings.describe_terminations())),
+        ),
+        (
             "episode reward",
             col(&|r| format!("{:.3}", r.summary.episode_return)),
         ),
@@ -395,6 +399,10 @@ pub fn format_rows(rows: &[EvalRow]) -> String {
                     format!("{:.1}% steps", 100.0 * g.non_foot_contact_share)
                 })
             }),
+        ),
+        (
+            "  of which the base",
+            col(&|r| gait(r, &|g| format!("{:.1}% steps", 100.0 * g.base_contact_share))),
         ),
         (
             "joint-target change RMS",

@@ -11,11 +11,15 @@
 //! - per episode, the heading change (rad, unwrapped), meaningful with a zero yaw command;
 //! - mean base velocity in the heading frame (forward, left): tells a robot that is too slow from
 //!   one whose speed swings within each stride, which the tracking error alone cannot;
+//! - how episodes ended: time-out, or which termination (base contact, tilt, too low, non-finite),
+//!   and the share of steps with the base itself on the ground — *why* a policy falls;
 //! - tracking errors and falls come from the episode statistics (`EpisodeSummary`).
 
 use serde::{Deserialize, Serialize};
 
-use crate::task::{MAX_PENALISED_BODIES, NUM_FEET, NUM_JOINTS, SimState, wrap_to_pi, yaw_of};
+use crate::task::{
+    DoneReason, MAX_PENALISED_BODIES, NUM_FEET, NUM_JOINTS, SimState, wrap_to_pi, yaw_of,
+};
 
 /// One control step of one env, as the meter sees it.
 #[derive(Debug, Clone, Copy)]
@@ -42,6 +46,8 @@ pub struct GaitMeter {
     swing_steps: [u64; NUM_FEET],
     touchdowns: [u64; NUM_FEET],
     non_foot_contact_steps: u64,
+    base_contact_steps: u64,
+    endings: EpisodeEndings,
     target_change_sq_sum: f64,
     target_change_steps: u64,
     target_second_diff_sq_sum: f64,
@@ -98,6 +104,9 @@ impl GaitMeter {
         }
         self.prev_contact = Some(contact);
         let n_pen = s.num_penalised.min(MAX_PENALISED_BODIES);
+        if st.base_force > s.contact_threshold {
+            self.base_contact_steps += 1;
+        }
         if st.base_force > s.contact_threshold
             || st.penalised_force[..n_pen]
                 .iter()
@@ -143,8 +152,9 @@ impl GaitMeter {
     }
 
     /// Ends the current episode (call on termination or time-out, before the next episode's first
-    /// step): its heading change is kept, per-episode state cleared.
-    pub fn end_episode(&mut self) {
+    /// step): its heading change and why it ended are kept, per-episode state cleared.
+    pub fn end_episode(&mut self, reason: DoneReason) {
+        self.endings.count(reason);
         if self.prev_yaw.is_some() {
             self.heading_changes.push(self.episode_heading_change);
         }
@@ -165,6 +175,8 @@ impl GaitMeter {
             self.touchdowns[f] += other.touchdowns[f];
         }
         self.non_foot_contact_steps += other.non_foot_contact_steps;
+        self.base_contact_steps += other.base_contact_steps;
+        self.endings.add(&other.endings);
         self.target_change_sq_sum += other.target_change_sq_sum;
         self.target_change_steps += other.target_change_steps;
         self.target_second_diff_sq_sum += other.target_second_diff_sq_sum;
@@ -213,6 +225,8 @@ impl GaitMeter {
             swing_share: swing,
             touchdown_hz,
             non_foot_contact_share: (self.non_foot_contact_steps as f64 / n) as f32,
+            base_contact_share: (self.base_contact_steps as f64 / n) as f32,
+            endings: self.endings,
             target_change_rms: (self.target_change_sq_sum / self.target_change_steps.max(1) as f64)
                 .sqrt() as f32,
             target_second_diff_rms: (self.target_second_diff_sq_sum
@@ -248,6 +262,13 @@ pub struct GaitReport {
     pub touchdown_hz: [f32; NUM_FEET],
     /// Share of steps with any non-foot body on the ground.
     pub non_foot_contact_share: f32,
+    /// Share of steps with the base (the termination links) on the ground. Absent (0) in reports
+    /// written before it existed.
+    #[serde(default)]
+    pub base_contact_share: f32,
+    /// How the episodes ended. Absent (all 0) in reports written before it existed.
+    #[serde(default)]
+    pub endings: EpisodeEndings,
     /// RMS joint-target change per control step (rad).
     pub target_change_rms: f32,
     /// RMS second difference of the joint targets (rad): ≈ 4× the amplitude for a sign flip every
@@ -267,6 +288,63 @@ pub struct GaitReport {
     /// before it existed.
     #[serde(default)]
     pub mean_heading_velocity: [f32; 2],
+}
+
+/// How many episodes ended, by [`DoneReason`]: the terminations say why a policy falls.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct EpisodeEndings {
+    pub time_out: u64,
+    pub base_contact: u64,
+    pub tilt: u64,
+    pub too_low: u64,
+    pub non_finite: u64,
+}
+
+impl EpisodeEndings {
+    /// Counts one ending (`DoneReason::None` is not an ending and is ignored).
+    pub fn count(&mut self, reason: DoneReason) {
+        match reason {
+            DoneReason::None => {}
+            DoneReason::TimeOut => self.time_out += 1,
+            DoneReason::BaseContact => self.base_contact += 1,
+            DoneReason::Tilt => self.tilt += 1,
+            DoneReason::TooLow => self.too_low += 1,
+            DoneReason::NonFinite => self.non_finite += 1,
+        }
+    }
+
+    /// Adds another tally.
+    pub fn add(&mut self, other: &EpisodeEndings) {
+        self.time_out += other.time_out;
+        self.base_contact += other.base_contact;
+        self.tilt += other.tilt;
+        self.too_low += other.too_low;
+        self.non_finite += other.non_finite;
+    }
+
+    /// Episodes that ended by a termination (not a time-out).
+    pub fn terminations(&self) -> u64 {
+        self.base_contact + self.tilt + self.too_low + self.non_finite
+    }
+
+    /// `"base contact 10, tilt 2"`: the non-zero terminations, or `"none"`.
+    pub fn describe_terminations(&self) -> String {
+        let parts: Vec<String> = [
+            ("base contact", self.base_contact),
+            ("tilt", self.tilt),
+            ("too low", self.too_low),
+            ("non-finite", self.non_finite),
+        ]
+        .iter()
+        .filter(|(_, n)| *n > 0)
+        .map(|(name, n)| format!("{name} {n}"))
+        .collect();
+        if parts.is_empty() {
+            "none".into()
+        } else {
+            parts.join(", ")
+        }
+    }
 }
 
 /// The walk criterion (issue "A real trot"): every bound must hold.
@@ -408,7 +486,7 @@ mod tests {
             let targets = [0.01 * step as f32; NUM_JOINTS];
             meter.record(&sample(&state, &targets));
         }
-        meter.end_episode();
+        meter.end_episode(DoneReason::TimeOut);
         let r = meter.report(0.30);
         assert_eq!(r.steps, 200);
         for s in r.swing_share {
@@ -451,6 +529,7 @@ mod tests {
                 .all(|d| (d - 0.4).abs() < 1e-5)
         );
         assert!((r.non_foot_contact_share - 0.5).abs() < 1e-6);
+        assert_eq!(r.base_contact_share, 0.0, "a knee is not the base");
         assert_eq!(r.swing_share, [0.0; NUM_FEET]);
         assert!((r.mean_abs_torque - 2.0).abs() < 1e-6);
         assert!((r.mean_power - 36.0).abs() < 1e-4);
@@ -475,21 +554,59 @@ mod tests {
             state.base_quat = quat_from_yaw(wrap_to_pi(0.05 * k as f32));
             meter.record(&sample(&state, &[0.0; NUM_JOINTS]));
         }
-        meter.end_episode();
+        meter.end_episode(DoneReason::TimeOut);
         // …and −1 rad in episode two, merged from another env.
         let mut other = GaitMeter::new();
         for k in 0..=10 {
             state.base_quat = quat_from_yaw(-0.1 * k as f32);
             other.record(&sample(&state, &[0.0; NUM_JOINTS]));
         }
-        other.end_episode();
+        other.end_episode(DoneReason::Tilt);
         meter.merge(&other);
         let r = meter.report(0.3);
+        assert_eq!(
+            r.endings,
+            EpisodeEndings {
+                time_out: 1,
+                tilt: 1,
+                ..Default::default()
+            }
+        );
         assert!(
             (r.heading_drift_rad - 3.0).abs() < 1e-3,
             "{}",
             r.heading_drift_rad
         );
+    }
+
+    /// The base on the ground in 1 step of 4, three episodes ending three ways (and a `None`
+    /// that is not an ending): the shares and the tally say why the policy fell.
+    #[test]
+    fn base_contact_and_endings_are_tallied() {
+        let mut meter = GaitMeter::new();
+        let mut state = SimState::default();
+        for step in 0..8 {
+            state.base_force = if step % 4 == 0 { 20.0 } else { 0.0 };
+            meter.record(&sample(&state, &[0.0; NUM_JOINTS]));
+        }
+        for reason in [
+            DoneReason::BaseContact,
+            DoneReason::None,
+            DoneReason::BaseContact,
+            DoneReason::TooLow,
+        ] {
+            meter.end_episode(reason);
+        }
+        let r = meter.report(0.3);
+        assert!((r.base_contact_share - 0.25).abs() < 1e-6);
+        assert!((r.non_foot_contact_share - 0.25).abs() < 1e-6);
+        assert_eq!(r.endings.terminations(), 3);
+        assert_eq!(r.endings.time_out, 0);
+        assert_eq!(
+            r.endings.describe_terminations(),
+            "base contact 2, too low 1"
+        );
+        assert_eq!(EpisodeEndings::default().describe_terminations(), "none");
     }
 
     #[test]
@@ -528,6 +645,8 @@ mod tests {
             swing_share: [0.4; NUM_FEET],
             touchdown_hz: [2.0; NUM_FEET],
             non_foot_contact_share: 0.0,
+            base_contact_share: 0.0,
+            endings: EpisodeEndings::default(),
             target_change_rms: 0.03,
             target_second_diff_rms: 0.01,
             joint_second_diff_rms: [0.01; NUM_JOINTS],

@@ -492,6 +492,8 @@ impl Task {
         raw[RewardTerm::TrackLinVelXyCoarseExp as usize] =
             (-lin_err_sq / (p.coarse_tracking_std * p.coarse_tracking_std)).exp();
         raw[RewardTerm::TrackAngVelZExp as usize] = (-ang_err * ang_err * inv_var).exp();
+        raw[RewardTerm::TrackAngVelZCoarseExp as usize] =
+            (-ang_err * ang_err / (p.coarse_tracking_std * p.coarse_tracking_std)).exp();
         raw[RewardTerm::LinVelZL2 as usize] = v[2] * v[2];
         raw[RewardTerm::AngVelXyL2 as usize] = w[0] * w[0] + w[1] * w[1];
         let mut torque = 0.0;

@@ -711,7 +711,7 @@ fn physics_and_rewards(shared: &Shared, w: &mut Worker, actions: &[f32]) {
                 dt: shared.task.spec.step_dt,
             });
             if w.results[i].done() {
-                meter.end_episode();
+                meter.end_episode(w.results[i].reason);
             }
         }
     }

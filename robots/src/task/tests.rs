@@ -223,6 +223,52 @@ fn coarse_tracking_kernel_matches_hand_computation() {
     );
 }
 
+#[test]
+fn coarse_yaw_kernel_matches_hand_computation() {
+    let mut cfg = EnvConfig {
+        recipe: crate::config::Recipe::Isaaclab,
+        ..EnvConfig::default()
+    };
+    cfg.terrain.preset = TerrainPreset::Flat;
+    cfg.rewards.track_ang_vel_z_coarse_exp = Some(0.4);
+    cfg.reward_params.coarse_tracking_std = 1.2;
+    cfg.reward_params.tracking_std = 0.35;
+    let spec = cfg.resolve("a1").unwrap();
+    let terrain = Terrain::generate(&spec.terrain).unwrap();
+    let task = Task::new(spec, a1_params()).unwrap();
+    let mut env = TaskEnvState::new();
+    let mut st = standing_state();
+    let mut rng = StdRng::seed_from_u64(1);
+    task.reset_env(&mut env, &st, [0.0; 3], &mut rng);
+    env.command = Command {
+        vx: 0.0,
+        vy: 0.0,
+        wz: 0.5,
+        time_left: 10.0,
+        ..Default::default()
+    };
+    let dt = 0.02;
+    // Turning at −0.3 rad/s against a 0.5 rad/s command: error 0.8 → 0.4 · dt · exp(−0.64/1.44);
+    // the sharp kernel (std 0.35, IsaacLab weight 0.75 for A1) pays exp(−0.64/0.1225) ≈ 0.005.
+    st.base_ang_vel_w = [0.0, 0.0, -0.3];
+    let r = task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
+    let coarse = r.terms[RewardTerm::TrackAngVelZCoarseExp as usize];
+    assert!(
+        (coarse - 0.4 * dt * (-0.64f32 / 1.44).exp()).abs() < 1e-6,
+        "{coarse}"
+    );
+    let sharp = r.terms[RewardTerm::TrackAngVelZExp as usize];
+    assert!(
+        (sharp - 0.75 * dt * (-0.64f32 / 0.1225).exp()).abs() < 1e-6,
+        "{sharp}"
+    );
+    assert_eq!(
+        r.terms[RewardTerm::TrackLinVelXyCoarseExp as usize],
+        0.0,
+        "weight 0 by default"
+    );
+}
+
 // rotate a base-frame vector into the world frame (test helper)
 fn quat_rotate_inv_inverse(q: [f32; 4], v: [f32; 3]) -> [f32; 3] {
     quat_rotate_inverse([q[0], -q[1], -q[2], -q[3]], v)
