@@ -85,6 +85,14 @@ impl Tap {
         }
     }
 
+    /// Waits until the controller's status reaches the tap (it publishes one every second).
+    async fn wait_for_route(&self, dir: &Path) {
+        self.wait_for("the controller's status", Duration::from_secs(20), dir, |t| {
+            t.status().is_some()
+        })
+        .await;
+    }
+
     fn events(&self) -> Vec<(Instant, Seen)> {
         self.events.lock().unwrap().clone()
     }
@@ -205,7 +213,9 @@ async fn trained_policy_walks_the_sim_robot_and_stale_state_damps_until_resume()
         .await
         .unwrap();
     let tap = Tap::new(&session, "dog").await;
-    tokio::time::sleep(Duration::from_millis(500)).await;
+    // The controller publishes its status every second from its first tick: once the tap has one,
+    // the route from the controller to the tap is live (no guessed propagation delay).
+    tap.wait_for_route(d).await;
 
     let sim_args = [
         "sim-robot",
@@ -314,10 +324,14 @@ async fn trained_policy_walks_the_sim_robot_and_stale_state_damps_until_resume()
     })
     .await;
     let back = Instant::now();
-    tokio::time::sleep(Duration::from_millis(800)).await;
+    // Count commands rather than sleep: a slow machine sends them later, not differently.
+    tap.wait_for("11 commands after the states came back", Duration::from_secs(20), d, |t| {
+        t.commands_since(back).len() > 10
+    })
+    .await;
     let latched = tap.commands_since(back);
     assert!(
-        latched.len() > 10 && latched.iter().all(|m| *m == ControlMode::Damping),
+        latched.iter().all(|m| *m == ControlMode::Damping),
         "{latched:?}"
     );
     // ... until the operator resumes: ramp, then policy.
@@ -397,6 +411,9 @@ async fn nan_policy_is_damped_and_wrong_robot_is_refused_before_any_command() {
         .await
         .unwrap();
     let wrong = Tap::new(&session, "other").await;
+    // Nothing will publish on these keys, so there is no route to wait for: this settling time and
+    // the 300 ms window below can only make the "nothing published" check pass vacuously on a slow
+    // machine, never fail it.
     tokio::time::sleep(Duration::from_millis(500)).await;
 
     // An A1 policy on a Go1: refused, nothing published.
@@ -450,7 +467,7 @@ async fn nan_policy_is_damped_and_wrong_robot_is_refused_before_any_command() {
         .await
         .unwrap();
     let tap = Tap::new(&robot_side, "pup").await;
-    tokio::time::sleep(Duration::from_millis(500)).await;
+    tap.wait_for_route(d).await;
     procs.spawn(
         "sim",
         &[
