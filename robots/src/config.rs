@@ -153,6 +153,10 @@ pub struct TerrainConfig {
     pub proportions: Option<TypeProportions>,
     /// Override of whether the terrain-level curriculum runs (default: on for `curriculum`/`paper`).
     pub curriculum: Option<bool>,
+    /// parry's `FIX_INTERNAL_EDGES` on the heightfield: contact normals against the edges shared
+    /// by two triangles are corrected from the neighbours, so a foot sliding over the grid is not
+    /// kicked by edges that are not really there. Off by default (policies trained before it).
+    pub fix_internal_edges: bool,
 }
 
 impl Default for TerrainConfig {
@@ -173,6 +177,7 @@ impl Default for TerrainConfig {
             slope: None,
             proportions: None,
             curriculum: None,
+            fix_internal_edges: false,
         }
     }
 }
@@ -249,6 +254,7 @@ impl TerrainConfig {
             curriculum,
             proportions,
             params: p,
+            fix_internal_edges: self.fix_internal_edges,
         };
         spec.validate()?;
         Ok(spec)

@@ -259,6 +259,8 @@ pub struct TerrainSpec {
     pub curriculum: bool,
     pub proportions: TypeProportions,
     pub params: SubTerrainParams,
+    /// Build the heightfield with parry's `FIX_INTERNAL_EDGES` (see `TerrainConfig`).
+    pub fix_internal_edges: bool,
 }
 
 fn bad(key: &str, reason: impl Into<String>) -> ConfigError {

@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 use rand::SeedableRng;
 use rand::rngs::SmallRng;
 use rapier3d::math::{Pose, Rot3, Vec3};
+use rapier3d::parry::shape::HeightFieldFlags;
 use rayon::prelude::*;
 
 use crate::actuator::Actuator;
@@ -637,8 +638,17 @@ fn terrain_blocks(t: &Terrain, block: usize) -> Vec<(rapier3d::prelude::SharedSh
                 0.0,
             );
             let pose = Pose::from_parts(centre, Rot3::from_rotation_x(std::f32::consts::FRAC_PI_2));
+            let flags = if t.spec.fix_internal_edges {
+                HeightFieldFlags::FIX_INTERNAL_EDGES
+            } else {
+                HeightFieldFlags::empty()
+            };
             out.push((
-                rapier3d::prelude::SharedShape::heightfield(m, Vec3::new(sx, 1.0, sy)),
+                rapier3d::prelude::SharedShape::heightfield_with_flags(
+                    m,
+                    Vec3::new(sx, 1.0, sy),
+                    flags,
+                ),
                 pose,
             ));
             y_start = y_end;
