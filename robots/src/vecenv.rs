@@ -801,3 +801,29 @@ fn observe_all(shared: &Shared, w: &mut Worker) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{TerrainConfig, TerrainPreset};
+    use crate::terrain::Terrain;
+
+    /// `[env.terrain] fix_internal_edges` reaches every heightfield block the physics collides with.
+    #[test]
+    fn fix_internal_edges_reaches_every_heightfield_block() {
+        for fix in [false, true] {
+            let mut c = TerrainConfig::with_preset(TerrainPreset::Curriculum);
+            c.border_width = 1.0;
+            c.num_rows = 2;
+            c.num_cols = 2;
+            c.fix_internal_edges = fix;
+            let t = Terrain::generate(&c.resolve("a1").unwrap()).unwrap();
+            let blocks = terrain_blocks(&t, GROUND_BLOCK);
+            assert!(blocks.len() > 4);
+            for (shape, _) in &blocks {
+                let flags = shape.as_heightfield().expect("a heightfield").flags();
+                assert_eq!(flags.contains(HeightFieldFlags::FIX_INTERNAL_EDGES), fix);
+            }
+        }
+    }
+}
