@@ -402,7 +402,11 @@ pub fn format_rows(rows: &[EvalRow]) -> String {
         ),
         (
             "  of which the base",
-            col(&|r| gait(r, &|g| format!("{:.1}% steps", 100.0 * g.base_contact_share))),
+            col(&|r| {
+                gait(r, &|g| {
+                    format!("{:.1}% steps", 100.0 * g.base_contact_share)
+                })
+            }),
         ),
         (
             "joint-target change RMS",

@@ -87,9 +87,12 @@ impl Tap {
 
     /// Waits until the controller's status reaches the tap (it publishes one every second).
     async fn wait_for_route(&self, dir: &Path) {
-        self.wait_for("the controller's status", Duration::from_secs(20), dir, |t| {
-            t.status().is_some()
-        })
+        self.wait_for(
+            "the controller's status",
+            Duration::from_secs(20),
+            dir,
+            |t| t.status().is_some(),
+        )
         .await;
     }
 
@@ -325,9 +328,12 @@ async fn trained_policy_walks_the_sim_robot_and_stale_state_damps_until_resume()
     .await;
     let back = Instant::now();
     // Count commands rather than sleep: a slow machine sends them later, not differently.
-    tap.wait_for("11 commands after the states came back", Duration::from_secs(20), d, |t| {
-        t.commands_since(back).len() > 10
-    })
+    tap.wait_for(
+        "11 commands after the states came back",
+        Duration::from_secs(20),
+        d,
+        |t| t.commands_since(back).len() > 10,
+    )
     .await;
     let latched = tap.commands_since(back);
     assert!(

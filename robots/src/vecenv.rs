@@ -816,6 +816,7 @@ mod tests {
             c.border_width = 1.0;
             c.num_rows = 2;
             c.num_cols = 2;
+            c.max_init_level = 1;
             c.fix_internal_edges = fix;
             let t = Terrain::generate(&c.resolve("a1").unwrap()).unwrap();
             let blocks = terrain_blocks(&t, GROUND_BLOCK);
