@@ -177,29 +177,44 @@ fn perfect_tracking_reward() {
     assert!(!r.done());
 }
 
-#[test]
-fn coarse_tracking_kernel_matches_hand_computation() {
+/// An A1 task on flat ground with IsaacLab's tables and `configure`'s changes, reset from the
+/// standing state, commanded `[vx, vy, wz]` for the next 10 s.
+fn flat_isaaclab_task(
+    configure: impl FnOnce(&mut EnvConfig),
+    [vx, vy, wz]: [f32; 3],
+) -> (Task, Terrain, TaskEnvState, SimState) {
     let mut cfg = EnvConfig {
         recipe: crate::config::Recipe::Isaaclab,
         ..EnvConfig::default()
     };
     cfg.terrain.preset = TerrainPreset::Flat;
-    cfg.rewards.track_lin_vel_xy_coarse_exp = Some(0.8);
-    cfg.reward_params.coarse_tracking_std = 1.2;
+    configure(&mut cfg);
     let spec = cfg.resolve("a1").unwrap();
     let terrain = Terrain::generate(&spec.terrain).unwrap();
     let task = Task::new(spec, a1_params()).unwrap();
     let mut env = TaskEnvState::new();
-    let mut st = standing_state();
+    let st = standing_state();
     let mut rng = StdRng::seed_from_u64(1);
     task.reset_env(&mut env, &st, [0.0; 3], &mut rng);
     env.command = Command {
-        vx: 1.0,
-        vy: 0.0,
-        wz: 0.0,
+        vx,
+        vy,
+        wz,
         time_left: 10.0,
         ..Default::default()
     };
+    (task, terrain, env, st)
+}
+
+#[test]
+fn coarse_tracking_kernel_matches_hand_computation() {
+    let (task, terrain, mut env, mut st) = flat_isaaclab_task(
+        |cfg| {
+            cfg.rewards.track_lin_vel_xy_coarse_exp = Some(0.8);
+            cfg.reward_params.coarse_tracking_std = 1.2;
+        },
+        [1.0, 0.0, 0.0],
+    );
     let dt = 0.02;
     // Standing at a 1 m/s command: error² 1 → 0.8 · dt · exp(−1/1.44); the sharp kernel
     // (std 0.5) pays exp(−4).
@@ -225,28 +240,14 @@ fn coarse_tracking_kernel_matches_hand_computation() {
 
 #[test]
 fn coarse_yaw_kernel_matches_hand_computation() {
-    let mut cfg = EnvConfig {
-        recipe: crate::config::Recipe::Isaaclab,
-        ..EnvConfig::default()
-    };
-    cfg.terrain.preset = TerrainPreset::Flat;
-    cfg.rewards.track_ang_vel_z_coarse_exp = Some(0.4);
-    cfg.reward_params.coarse_tracking_std = 1.2;
-    cfg.reward_params.tracking_std = 0.35;
-    let spec = cfg.resolve("a1").unwrap();
-    let terrain = Terrain::generate(&spec.terrain).unwrap();
-    let task = Task::new(spec, a1_params()).unwrap();
-    let mut env = TaskEnvState::new();
-    let mut st = standing_state();
-    let mut rng = StdRng::seed_from_u64(1);
-    task.reset_env(&mut env, &st, [0.0; 3], &mut rng);
-    env.command = Command {
-        vx: 0.0,
-        vy: 0.0,
-        wz: 0.5,
-        time_left: 10.0,
-        ..Default::default()
-    };
+    let (task, terrain, mut env, mut st) = flat_isaaclab_task(
+        |cfg| {
+            cfg.rewards.track_ang_vel_z_coarse_exp = Some(0.4);
+            cfg.reward_params.coarse_tracking_std = 1.2;
+            cfg.reward_params.tracking_std = 0.35;
+        },
+        [0.0, 0.0, 0.5],
+    );
     let dt = 0.02;
     // Turning at −0.3 rad/s against a 0.5 rad/s command: error 0.8 → 0.4 · dt · exp(−0.64/1.44);
     // the sharp kernel (std 0.35, IsaacLab weight 0.75 for A1) pays exp(−0.64/0.1225) ≈ 0.005.
