@@ -17,6 +17,7 @@ pub mod play_cmd;
 mod play_rerun;
 pub mod registry_cmd;
 pub mod report_cmd;
+pub mod router_cmd;
 pub mod robots_cmd;
 pub mod runtime;
 pub mod train_cmd;

@@ -42,6 +42,8 @@ enum Command {
     Registry(l3p_cli::registry_cmd::RegistryArgs),
     /// Run a policy as a 50 Hz controller for a robot (watchdog, damping, start-up ramp).
     Deploy(l3p_cli::deploy_cmd::DeployArgs),
+    /// Run a Zenoh router (the library router `zenohd` runs) for processes on several machines.
+    Router(l3p_cli::router_cmd::RouterArgs),
     /// Run the simulator as a stand-in robot on the deploy keys.
     SimRobot(l3p_cli::deploy_cmd::SimRobotArgs),
     /// Send an operator request to a running `l3p deploy`: resume, damp or stop.
@@ -92,6 +94,7 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Bench(args) => l3p_cli::bench_cmd::run(args),
         Command::Experiment(args) => l3p_cli::experiment_cmd::run(args),
         Command::Deploy(args) => l3p_cli::deploy_cmd::deploy(args),
+        Command::Router(args) => l3p_cli::router_cmd::run(args),
         Command::SimRobot(args) => l3p_cli::deploy_cmd::sim_robot(args),
         Command::Operate(args) => l3p_cli::deploy_cmd::operate(args),
         Command::Export(args) => l3p_cli::deploy_cmd::export(args),

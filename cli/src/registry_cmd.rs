@@ -15,7 +15,6 @@ use l3p_registry::{
     ArtifactKind, ArtifactMeta, LineageRole, ListFilter, PutRequest, Registry, RegistryAccess,
     RegistryClient,
 };
-use tokio_util::sync::CancellationToken;
 
 use crate::runtime::NetArgs;
 
@@ -43,8 +42,8 @@ pub enum RegistryCommand {
         /// Data directory holding registry.db.
         #[arg(long, default_value = "l3p-data")]
         data: PathBuf,
-        /// Endpoints to listen on (repeatable).
-        #[arg(long, default_value = "tcp/127.0.0.1:7447")]
+        /// Endpoints to listen on (repeatable); default tcp/127.0.0.1:7447 without --config.
+        #[arg(long)]
         listen: Vec<String>,
         /// Endpoints (routers or peers) to connect to (repeatable).
         #[arg(long)]
@@ -55,6 +54,10 @@ pub enum RegistryCommand {
         /// Zenoh JSON5 config file (TLS, ACL, ...), loaded before the flags above.
         #[arg(long)]
         zenoh_config: Option<PathBuf>,
+        /// An l3p config whose `[zenoh]` section (mode, endpoints, `[zenoh.tls]`) the service
+        /// uses, as the learner and actors do; the flags above override it.
+        #[arg(long)]
+        config: Option<PathBuf>,
     },
     /// List stored versions.
     List {
@@ -162,7 +165,27 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             connect,
             scouting,
             zenoh_config,
-        } => serve(&data, listen, connect, scouting, zenoh_config).await,
+            config,
+        } => {
+            let mut settings = match &config {
+                Some(path) => crate::config::Config::load(path)?.zenoh,
+                None => ZenohSettings {
+                    listen: vec!["tcp/127.0.0.1:7447".into()],
+                    ..ZenohSettings::default()
+                },
+            };
+            if !listen.is_empty() {
+                settings.listen = listen;
+            }
+            if !connect.is_empty() {
+                settings.connect = connect;
+            }
+            settings.multicast_scouting |= scouting;
+            if zenoh_config.is_some() {
+                settings.config_file = zenoh_config;
+            }
+            serve(&data, settings).await
+        }
         RegistryCommand::List {
             kind,
             name,
@@ -327,35 +350,16 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
     }
 }
 
-async fn serve(
-    data: &Path,
-    listen: Vec<String>,
-    connect: Vec<String>,
-    scouting: bool,
-    config_file: Option<PathBuf>,
-) -> anyhow::Result<()> {
+async fn serve(data: &Path, settings: ZenohSettings) -> anyhow::Result<()> {
     let registry = Arc::new(Registry::open(data)?);
-    let settings = ZenohSettings {
-        mode: "peer".into(),
-        listen,
-        connect,
-        multicast_scouting: scouting,
-        config_file,
-        tls: None,
-    };
     let session = open_session(&settings).await?;
-    let cancel = CancellationToken::new();
-    let on_signal = cancel.clone();
-    tokio::spawn(async move {
-        if tokio::signal::ctrl_c().await.is_ok() {
-            tracing::info!("interrupted, stopping the registry service");
-        }
-        on_signal.cancel();
-    });
+    // Ctrl-C or SIGTERM (systemd, a supervisor) stop the service cleanly.
+    let cancel = crate::runtime::cancel_on_signal();
     eprintln!(
-        "registry {} serving on {:?}",
+        "registry {} serving on {:?} (connected to {:?})",
         registry.path().display(),
-        settings.listen
+        settings.listen,
+        settings.connect
     );
     l3p_registry::serve(&session, registry, cancel).await?;
     session
