@@ -1,13 +1,14 @@
 //! Multi-host soak (issue 16): the registry, the learner and two actors each on a "host" of its own
 //! (a Linux network namespace), joined only through `l3p router` in a fifth namespace, over mutual
 //! TLS with the shipped ACL (`deploy/zenoh/router-acl.json5`). For `L3P_SOAK_SECONDS` (default 60, the
-//! CI version; 600 for the long soak) it injects a fault every `L3P_SOAK_FAULT_EVERY_S` (default 15):
+//! CI version; 600 for the long soak) it injects a fault every `L3P_SOAK_FAULT_EVERY_S` (default 20):
 //! SIGKILL of an actor, of the learner or of the registry (each restarted), or an actor's link cut
-//! for a while (a partition). Invariants: training advances after every fault; a killed learner
+//! for `L3P_SOAK_PARTITION_S` (default 30; a partition). Invariants: training advances after every fault; a killed learner
 //! resumes from its last checkpoint; at the end the registry passes `PRAGMA integrity_check` and a
 //! blob re-hash, holds consecutive checkpoint versions with increasing iterations and the learner's
 //! final one (no version lost); no process is left in any namespace; a peer whose certificate is
-//! not from the run's CA, and one that does not speak TLS, get nothing through the router.
+//! not from the run's CA, and one that does not speak TLS, get nothing through the router, and an
+//! actor's certificate may not change the registry (the ACL), where a learner's may.
 //!
 //! Needs root (network namespaces), `ip` (iproute2) and `openssl`; without them it says so and
 //! passes without running. `tc netem` (latency and loss) is used when the kernel has it (it is
@@ -407,8 +408,8 @@ fn training_survives_faults_across_hosts_through_an_authenticated_router() {
         }
     };
     let soak_s = env_seconds("L3P_SOAK_SECONDS", 60);
-    let fault_every = Duration::from_secs(env_seconds("L3P_SOAK_FAULT_EVERY_S", 15));
-    let partition_s = env_seconds("L3P_SOAK_PARTITION_S", 20);
+    let fault_every = Duration::from_secs(env_seconds("L3P_SOAK_FAULT_EVERY_S", 20));
+    let partition_s = env_seconds("L3P_SOAK_PARTITION_S", 30);
     let dir = tempfile::tempdir().unwrap();
     let dir = dir.path();
     let certs = dir.join("certs");
@@ -610,6 +611,37 @@ connect = ["tls/{router}:7447"]
                 .unwrap_or_default()
         );
     }
+
+    // The ACL: registry writes (here `tag`, which moves an alias) only with a learner's certificate.
+    let rogue_learner = host_config("rogue", "learner");
+    let tag = |cfg: &str, alias: &str| {
+        Command::new("ip")
+            .args(["netns", "exec", &procs.hosts.ns("rogue"), l3p()])
+            .args(["registry", "tag", &format!("{RUN}-checkpoint@1"), alias, "--config", cfg])
+            .env("RUST_LOG", "off")
+            .output()
+            .unwrap()
+    };
+    // (Retried: the first registry checkpoint is uploaded in the background.)
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let mut out = tag(&rogue_learner, "soak-probe");
+    while !out.status.success() && Instant::now() < deadline {
+        std::thread::sleep(Duration::from_secs(1));
+        out = tag(&rogue_learner, "soak-probe");
+    }
+    assert!(
+        out.status.success(),
+        "a learner's certificate cannot tag: {}{}",
+        String::from_utf8_lossy(&out.stderr),
+        log_tails(dir)
+    );
+    let out = tag(&rogue_valid, "stolen");
+    assert!(
+        !out.status.success(),
+        "an actor's certificate moved an alias: {}",
+        String::from_utf8_lossy(&out.stdout)
+    );
+    eprintln!("registry write with an actor's certificate: refused by the ACL");
 
     // Faults: every kind once (in a random order), then random ones until the time is up.
     let seed = std::process::id() as u64 | 1;
