@@ -98,5 +98,8 @@ fn a_router_open_to_the_network_without_mutual_tls_is_refused_unless_insecure() 
         std::thread::sleep(Duration::from_millis(50));
     }
     let text = std::fs::read_to_string(&log).unwrap();
-    assert!(text.contains("unauthenticated links (--insecure)"), "{text}");
+    assert!(
+        text.contains("unauthenticated links (--insecure)"),
+        "{text}"
+    );
 }
