@@ -50,7 +50,7 @@ pub fn check_deploy_links(zenoh: &ZenohSettings, insecure: bool) -> anyhow::Resu
         Exposure::Unauthenticated(why) => anyhow::bail!(
             "refusing to command a robot over unauthenticated links: {why}\n\
              hint: give [zenoh.tls] ca, cert and key (a certificate with CN l3p-deploy, \
-             deploy/certs/README.md) and use tls/ endpoints, keep every endpoint on loopback, or \
+             deploy/certs/README.md) and use quic/ (or tls/) endpoints, keep every endpoint on loopback, or \
              pass --insecure on a network you trust"
         ),
     }

@@ -1,6 +1,7 @@
 //! Multi-host soak (issue 16): the registry, the learner and two actors each on a "host" of its own
 //! (a Linux network namespace), joined only through `l3p router` in a fifth namespace, over mutual
-//! TLS with the shipped ACL (`deploy/zenoh/router-acl.json5`). For `L3P_SOAK_SECONDS` (default 60, the
+//! TLS with the shipped ACL (`deploy/zenoh/router-acl.json5`), on `quic/` links (`L3P_SOAK_LINK=tls`
+//! runs them on `tls/`, which zenoh#2557 makes crash under faults). For `L3P_SOAK_SECONDS` (default 60, the
 //! CI version; 600 for the long soak) it injects a fault every `L3P_SOAK_FAULT_EVERY_S` (default 20):
 //! SIGKILL of an actor, of the learner or of the registry (each restarted); with
 //! `L3P_SOAK_PARTITION=1` also an actor's link cut for `L3P_SOAK_PARTITION_S` (default 30; fails
@@ -156,6 +157,15 @@ impl Hosts {
         .unwrap();
     }
 
+    /// `ss -tan` in the router's namespace (for a failure message).
+    fn router_sockets(&self) -> String {
+        Command::new("ip")
+            .args(["netns", "exec", &self.router_ns(), "ss", "-tan"])
+            .output()
+            .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+            .unwrap_or_else(|e| format!("ss: {e}"))
+    }
+
     /// Pids of processes still running in a namespace.
     fn pids(&self, ns: &str) -> Vec<String> {
         Command::new("ip")
@@ -205,7 +215,10 @@ impl Procs {
         let child = Command::new("ip")
             .args(["netns", "exec", &self.hosts.ns_or_router(host), l3p()])
             .args(args)
-            .env("RUST_LOG", "info")
+            .env(
+                "RUST_LOG",
+                std::env::var("L3P_SOAK_RUST_LOG").unwrap_or_else(|_| "info".into()),
+            )
             .stdin(Stdio::null())
             .stdout(log.try_clone().unwrap())
             .stderr(log)
@@ -231,6 +244,37 @@ impl Procs {
             }
             std::thread::sleep(Duration::from_millis(50));
         }
+    }
+
+    /// Every thread's stack of a running process (gdb, where installed), for a failure message.
+    fn stacks(&self, name: &str) -> String {
+        let Some((_, child)) = self.running.iter().find(|(n, _)| n == name) else {
+            return format!("{name} is not running");
+        };
+        let pid = child.id().to_string();
+        let alive = std::path::Path::new("/proc").join(&pid).exists();
+        let gdb = Command::new("timeout")
+            .args([
+                "60",
+                "gdb",
+                "-p",
+                &pid,
+                "-batch",
+                "-ex",
+                "thread apply all bt 10",
+            ])
+            .output()
+            .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
+            .unwrap_or_else(|e| format!("gdb: {e}"));
+        let tail: String = gdb
+            .chars()
+            .rev()
+            .take(20_000)
+            .collect::<Vec<_>>()
+            .into_iter()
+            .rev()
+            .collect();
+        format!("pid {pid}, alive: {alive}\n{tail}")
     }
 
     fn kill(&mut self, name: &str) {
@@ -392,9 +436,12 @@ fn wait_progress(
         }
         assert!(
             start.elapsed() < timeout,
-            "no training progress {what} within {timeout:?} (iteration {iteration}, {} records){}",
+            "no training progress {what} within {timeout:?} (iteration {iteration}, {} records){}\n\
+             --- the router's TCP sockets ---\n{}\n--- the learner's threads ---\n{}",
             records.len(),
-            log_tails(&procs.dir)
+            log_tails(&procs.dir),
+            procs.hosts.router_sockets(),
+            procs.stacks("learner")
         );
         std::thread::sleep(Duration::from_millis(100));
     }
@@ -449,7 +496,12 @@ fn training_survives_faults_across_hosts_through_an_authenticated_router() {
     let soak_s = env_seconds("L3P_SOAK_SECONDS", 60);
     let fault_every = Duration::from_secs(env_seconds("L3P_SOAK_FAULT_EVERY_S", 20));
     let partition_s = env_seconds("L3P_SOAK_PARTITION_S", 30);
-    let dir = tempfile::tempdir().unwrap();
+    let mut dir = tempfile::tempdir().unwrap();
+    // `L3P_SOAK_KEEP=1` keeps the logs, configs and data for a post-mortem (path printed).
+    if std::env::var("L3P_SOAK_KEEP").is_ok_and(|v| v == "1") {
+        dir.disable_cleanup(true);
+        eprintln!("soak directory kept: {}", dir.path().display());
+    }
     let dir = dir.path();
     let certs = dir.join("certs");
     std::fs::create_dir_all(&certs).unwrap();
@@ -494,7 +546,8 @@ fn training_survives_faults_across_hosts_through_an_authenticated_router() {
     eprintln!("netem: {}", figures.netem);
 
     let data = dir.join("data");
-    let acl = Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/zenoh/router-acl.json5");
+    let shipped_acl =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../deploy/zenoh/router-acl.json5");
     let tls = |name: &str| {
         format!(
             "[zenoh.tls]\nca = \"{ca}\"\ncert = \"{cert}\"\nkey = \"{key}\"\n",
@@ -503,8 +556,28 @@ fn training_survives_faults_across_hosts_through_an_authenticated_router() {
             key = certs.join(format!("{name}-key.pem")).display(),
         )
     };
+    // QUIC by default; `L3P_SOAK_LINK=tls` reproduces the TLS link's defect (zenoh#2557: a killed
+    // peer can crash the router with SIGILL).
+    let link = std::env::var("L3P_SOAK_LINK").unwrap_or_else(|_| "quic".into());
+    assert!(
+        ["quic", "tls"].contains(&link.as_str()),
+        "L3P_SOAK_LINK: quic or tls"
+    );
+    eprintln!("links: {link}/ with mutual TLS");
+    // The shipped ACL file, with its link protocol set to the one under test.
+    let acl = dir.join("router-acl.json5");
+    let acl_text = std::fs::read_to_string(&shipped_acl).unwrap();
+    assert!(
+        acl_text.contains(r#"protocols: ["quic"]"#),
+        "router-acl.json5 changed"
+    );
+    let acl_text = acl_text.replace(
+        r#"protocols: ["quic"]"#,
+        &format!(r#"protocols: ["{link}"]"#),
+    );
+    std::fs::write(&acl, acl_text).unwrap();
     let listen: Vec<String> = (1..=HOSTS.len())
-        .map(|link| format!("\"tls/{}:7447\"", hosts.router_ip(link)))
+        .map(|l| format!("\"{link}/{}:7447\"", hosts.router_ip(l)))
         .collect();
     let router_toml = dir.join("router.toml");
     std::fs::write(
@@ -543,10 +616,16 @@ threads = 1
 
 [zenoh]
 mode = "client"
-connect = ["tls/{router}:7447"]
-{tls}"#,
+connect = ["{link}/{router}:7447"]
+{retry}{tls}"#,
             data = data.display(),
             router = router_ips[Hosts::link_of(host) - 1],
+            // A peer the router refuses fails at once instead of retrying for 10 s.
+            retry = if cert == "impostor" {
+                "connect_retry_s = 0\n"
+            } else {
+                ""
+            },
             tls = tls(cert),
         );
         std::fs::write(&path, text).unwrap();
@@ -561,7 +640,7 @@ connect = ["tls/{router}:7447"]
     std::fs::write(
         &rogue_plain,
         format!(
-            "[zenoh]\nmode = \"client\"\nconnect = [\"tcp/{}:7447\"]\n",
+            "[zenoh]\nmode = \"client\"\nconnect = [\"tcp/{}:7447\"]\nconnect_retry_s = 0\n",
             hosts.router_ip(Hosts::link_of("rogue"))
         ),
     )

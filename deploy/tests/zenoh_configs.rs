@@ -105,8 +105,8 @@ fn tls_configs_use_mutual_tls_and_verify_names() {
                 !endpoints.is_empty()
                     && endpoints
                         .iter()
-                        .all(|e| e.as_str().unwrap().starts_with("tls/")),
-                "{name}: routers with certificates listen on TLS only: {listen}"
+                        .all(|e| e.as_str().unwrap().starts_with("quic/")),
+                "{name}: routers with certificates listen on QUIC (TLS 1.3) only: {listen}"
             );
         }
     }
@@ -352,7 +352,7 @@ fn open_router(dir: &Path, port: u16) -> Session {
     set(
         &mut config,
         "listen/endpoints",
-        &format!(r#"["tls/127.0.0.1:{port}"]"#),
+        &format!(r#"["quic/127.0.0.1:{port}"]"#),
     );
     let tls = "transport/link/tls";
     set(
@@ -380,7 +380,7 @@ fn open_client(dir: &Path, port: u16, cn: &str) -> Session {
     set(
         &mut config,
         "connect/endpoints",
-        &format!(r#"["tls/127.0.0.1:{port}"]"#),
+        &format!(r#"["quic/127.0.0.1:{port}"]"#),
     );
     // The file retries the router forever (right for a service); a test fails instead.
     set(&mut config, "connect/timeout_ms", "5000");
@@ -411,7 +411,7 @@ fn open_client(dir: &Path, port: u16, cn: &str) -> Session {
 fn open_client_with_tls_settings(dir: &Path, port: u16, cn: &str) -> Session {
     let settings = l3p_net::ZenohSettings {
         mode: "client".into(),
-        connect: vec![format!("tls/127.0.0.1:{port}")],
+        connect: vec![format!("quic/127.0.0.1:{port}")],
         tls: Some(l3p_net::TlsSettings {
             ca: dir.join("ca.pem"),
             cert: dir.join(format!("{cn}.pem")),

@@ -26,6 +26,11 @@ pub struct ZenohSettings {
     /// Multicast scouting (automatic discovery on the LAN). Off by default: processes find each other
     /// through `listen`/`connect` only, so nothing joins a LAN unless configured to.
     pub multicast_scouting: bool,
+    /// Client mode: how long opening a session keeps retrying `connect` (backing off from 1 to 4 s)
+    /// before it fails, so that a daemon started before its router, or while the router restarts,
+    /// waits for it instead of exiting. 0: one try. Peers and routers always retry in the
+    /// background (Zenoh's default). A `connect.timeout_ms` set in `config_file` wins.
+    pub connect_retry_s: u64,
     /// Optional Zenoh JSON5 config file loaded first (TLS, ACL, ...); the fields above override it.
     pub config_file: Option<PathBuf>,
     /// Mutual TLS on every TLS link this process opens or accepts (`[zenoh.tls]`).
@@ -35,7 +40,10 @@ pub struct ZenohSettings {
 /// Mutual TLS (`[zenoh.tls]`): the process proves its role with a certificate from the run's private
 /// CA and accepts only peers that do the same. The certificate's common name is the role the router's
 /// ACL grants (`deploy/zenoh/router-acl.json5`; how to make them: `deploy/certs/README.md`). Only
-/// `tls/<host>:<port>` endpoints use it; a `tcp/` endpoint stays plain.
+/// `quic/<host>:<port>` and `tls/<host>:<port>` endpoints use it; a `tcp/` endpoint stays plain.
+/// Prefer `quic/` between machines: Zenoh 1.10's `tls/` link reads and writes one rustls stream from
+/// two tasks at once (eclipse-zenoh/zenoh#2557), which the multi-host soak saw crash a router with
+/// SIGILL when a peer was killed; QUIC keeps each direction on its own stream.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TlsSettings {
@@ -65,11 +73,16 @@ impl Default for ZenohSettings {
             listen: Vec::new(),
             connect: Vec::new(),
             multicast_scouting: false,
+            connect_retry_s: DEFAULT_CONNECT_RETRY_S,
             config_file: None,
             tls: None,
         }
     }
 }
+
+/// [`ZenohSettings::connect_retry_s`] by default: a router restart (a few seconds), not so long that
+/// a one-shot command with a wrong endpoint seems to hang.
+pub const DEFAULT_CONNECT_RETRY_S: u64 = 10;
 
 impl ZenohSettings {
     /// Loopback-only peer: listens on 127.0.0.1 (port `listen`, or any free one — never Zenoh's
@@ -83,6 +96,7 @@ impl ZenohSettings {
                 .map(|p| format!("tcp/127.0.0.1:{p}"))
                 .collect(),
             multicast_scouting: false,
+            connect_retry_s: DEFAULT_CONNECT_RETRY_S,
             config_file: None,
             tls: None,
         }
@@ -126,6 +140,20 @@ impl ZenohSettings {
                 set(&format!("{link}/{side}_private_key"), path(&tls.key))?;
             }
         }
+        // Zenoh's client default is a single try: a router that is restarting when a daemon starts
+        // would make the daemon exit (the multi-host soak saw a learner refused this way).
+        let configured = config
+            .get_json("connect/timeout_ms")
+            .is_ok_and(|text| text.trim() != "null");
+        if !configured {
+            let millis = self
+                .connect_retry_s
+                .saturating_mul(1000)
+                .min(i64::MAX as u64);
+            config
+                .insert_json5("connect/timeout_ms", &format!("{{ client: {millis} }}"))
+                .map_err(|e| NetError::Config(format!("connect/timeout_ms: {e}")))?;
+        }
         Ok(config)
     }
 
@@ -156,7 +184,8 @@ impl ZenohSettings {
                 continue;
             }
             remote = true;
-            let tls = endpoint.split('/').next() == Some("tls");
+            // QUIC is TLS 1.3 underneath and reads the same `transport/link/tls` settings.
+            let tls = matches!(endpoint.split('/').next(), Some("tls" | "quic"));
             if !(tls && mutual_tls) {
                 let why = if tls {
                     "TLS without client certificates (give [zenoh.tls])"
@@ -384,6 +413,16 @@ mod tests {
             ..open(&["tcp/127.0.0.1:7449"], &["tls/router.example.com:7447"])
         };
         assert_eq!(exposure(&tls), Exposure::Authenticated);
+        let quic = ZenohSettings {
+            tls: Some(tls_files(dir.path())),
+            ..open(&[], &["quic/router.example.com:7447"])
+        };
+        assert_eq!(exposure(&quic), Exposure::Authenticated);
+        let quic_without_certificates = open(&[], &["quic/router.example.com:7447"]);
+        assert!(matches!(
+            exposure(&quic_without_certificates),
+            Exposure::Unauthenticated(_)
+        ));
         // One plain link off the machine is enough to be open, certificates or not.
         let mixed = ZenohSettings {
             connect: vec![
@@ -448,6 +487,74 @@ mod tests {
             ..ZenohSettings::default()
         };
         assert_eq!(exposure(&settings), Exposure::Authenticated);
+    }
+
+    /// A client started before its router waits for it (`connect_retry_s`); with 0 it fails at once.
+    #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+    async fn a_client_waits_for_a_router_that_starts_late() {
+        let port = free_loopback_port().unwrap();
+        let endpoint = format!("tcp/127.0.0.1:{port}");
+        let once = ZenohSettings {
+            mode: "client".into(),
+            connect: vec![endpoint.clone()],
+            connect_retry_s: 0,
+            ..ZenohSettings::default()
+        };
+        let started = std::time::Instant::now();
+        assert!(matches!(open_session(&once).await, Err(NetError::Open(_))));
+        assert!(started.elapsed() < std::time::Duration::from_secs(2));
+
+        let router_settings = ZenohSettings {
+            mode: "router".into(),
+            listen: vec![endpoint],
+            ..ZenohSettings::default()
+        };
+        let router = tokio::spawn(async move {
+            tokio::time::sleep(std::time::Duration::from_millis(1500)).await;
+            open_session(&router_settings).await.unwrap()
+        });
+        let patient = ZenohSettings {
+            connect_retry_s: DEFAULT_CONNECT_RETRY_S,
+            ..once
+        };
+        let client = open_session(&patient)
+            .await
+            .expect("the client gave up before the router started");
+        let router = router.await.unwrap();
+        let routers: Vec<_> = client.info().routers_zid().await.collect();
+        assert_eq!(routers, vec![router.zid()]);
+        client.close().await.unwrap();
+        router.close().await.unwrap();
+    }
+
+    /// A `connect.timeout_ms` from the Zenoh file is kept; otherwise `connect_retry_s` sets it.
+    #[test]
+    fn connect_retry_sets_the_client_timeout_unless_the_file_does() {
+        let timeout = |settings: &ZenohSettings| {
+            settings
+                .to_zenoh_config()
+                .unwrap()
+                .get_json("connect/timeout_ms")
+                .unwrap()
+        };
+        let settings = ZenohSettings {
+            connect_retry_s: 7,
+            ..ZenohSettings::default()
+        };
+        assert!(
+            timeout(&settings).contains("7000"),
+            "{}",
+            timeout(&settings)
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("zenoh.json5");
+        std::fs::write(&file, "{ connect: { timeout_ms: { client: 1234 } } }").unwrap();
+        let from_file = ZenohSettings {
+            config_file: Some(file),
+            ..settings
+        };
+        let text = timeout(&from_file);
+        assert!(text.contains("1234") && !text.contains("7000"), "{text}");
     }
 
     /// A connect-only session (what actors and one-shot commands open) listens on no port.
