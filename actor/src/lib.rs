@@ -353,8 +353,12 @@ pub async fn fetch_policy(
                 announce.robots.iter().map(|r| &r.robot).collect::<Vec<_>>()
             ))
         })?;
+    // No consolidation: the first reply is handed over at once. Zenoh's default holds replies until
+    // every matching queryable has answered, so a learner killed a moment ago (its queryable is
+    // dropped only when its lease expires, up to 10 s on QUIC) would delay every fetch.
     let replies = session
         .get(keys::policy_weights(&announce.run, robot, announce.version))
+        .consolidation(zenoh::query::ConsolidationMode::None)
         .timeout(Duration::from_secs(30))
         .await
         .map_err(zerr)?;

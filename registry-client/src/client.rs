@@ -230,10 +230,13 @@ impl RegistryClient {
             if remaining.is_zero() {
                 return Err(no_reply(key));
             }
+            // First reply at once, not when every matching queryable has answered (a registry
+            // killed a moment ago keeps its queryable until its lease expires).
             let get = self
                 .session
                 .get(&key)
                 .payload(payload.clone())
+                .consolidation(zenoh::query::ConsolidationMode::None)
                 .timeout(remaining);
             let replies = match &attachment {
                 Some(attachment) => get.attachment(attachment.clone()).await,
