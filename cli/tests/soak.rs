@@ -13,8 +13,9 @@
 //! actor's certificate may not change the registry (the ACL), where a learner's may.
 //!
 //! Needs root (network namespaces), `ip` (iproute2) and `openssl`; without them it says so and
-//! passes without running. `tc netem` (latency and loss) is used when the kernel has it (it is
-//! missing on the project's CI machines, where the test reports that). `L3P_SOAK_REPORT=<file>`
+//! passes without running. The actor links are degraded with `tc netem` (delay and loss) where the
+//! kernel has it, else with `tc tbf` (a slow link with a bounded queue: netem is missing on the
+//! project's CI machines); the test reports which. `L3P_SOAK_REPORT=<file>`
 //! writes the figures as JSON (BENCHMARKS.md "Multi-host soak").
 
 use std::collections::BTreeMap;
@@ -522,26 +523,31 @@ fn training_survives_faults_across_hosts_through_an_authenticated_router() {
     // A peer with a certificate from another CA, claiming the learner's name.
     make_certs(&certs, "other-ca", &[("impostor", "l3p-learner", "")]);
 
-    // tc netem on the actors' links where the kernel has it.
+    // Degraded actor links: `tc netem` delay and loss where the kernel has it; otherwise a token
+    // bucket (`tbf`: a slow link whose queue adds delay and drops what overflows), both directions.
     let mut figures = Figures {
-        netem: "not available (sch_netem missing)".into(),
+        netem: "not available (no sch_netem, no sch_tbf)".into(),
         ..Figures::default()
     };
-    let mut netem_ok = true;
-    for host in ["actor-a", "actor-b"] {
-        let (_, router_if) = hosts.ifaces(Hosts::link_of(host));
-        let router_ns = hosts.router_ns();
-        netem_ok &= run_ok(
-            "ip",
-            &[
-                "netns", "exec", &router_ns, "tc", "qdisc", "add", "dev", &router_if, "root",
-                "netem", "delay", "20ms", "5ms", "loss", "1%",
-            ],
-        )
-        .is_ok();
-    }
-    if netem_ok {
-        figures.netem = "20 ms ± 5 ms delay, 1% loss on both actor links".into();
+    let shape = |qdisc: &[&str]| -> bool {
+        ["actor-a", "actor-b"].iter().all(|host| {
+            let (host_if, router_if) = hosts.ifaces(Hosts::link_of(host));
+            [(hosts.router_ns(), router_if), (hosts.ns(host), host_if)]
+                .iter()
+                .all(|(ns, dev)| {
+                    let mut args = vec!["netns", "exec", ns, "tc", "qdisc", "replace", "dev"];
+                    args.extend([dev.as_str(), "root"]);
+                    args.extend(qdisc);
+                    run_ok("ip", &args).is_ok()
+                })
+        })
+    };
+    if shape(&["netem", "delay", "20ms", "5ms", "loss", "1%"]) {
+        figures.netem = "netem: 20 ms ± 5 ms delay, 1% loss each way on both actor links".into();
+    } else if shape(&["tbf", "rate", "8mbit", "burst", "16kb", "latency", "50ms"]) {
+        figures.netem = "no sch_netem; tbf: 8 Mbit/s, up to 50 ms of queue (tail drop) each way \
+                         on both actor links"
+            .into();
     }
     eprintln!("netem: {}", figures.netem);
 
