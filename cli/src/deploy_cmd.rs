@@ -242,7 +242,7 @@ pub struct ExportArgs {
     #[arg(long)]
     pub robot: Option<String>,
     /// Read the registry at `<dir>/registry.db` directly instead of asking a service.
-    #[arg(long)]
+    #[arg(long, visible_alias = "data-dir")]
     pub data: Option<PathBuf>,
     #[command(flatten)]
     pub net: NetArgs,

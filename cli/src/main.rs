@@ -127,3 +127,37 @@ fn keep_large_allocations_on_the_heap() {
 
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
 fn keep_large_allocations_on_the_heap() {}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every command that reads a data directory takes `--data-dir` (export and registry call it
+    /// `--data`, and accept both).
+    #[test]
+    fn data_dir_is_accepted_everywhere() {
+        let parse = |args: &[&str]| {
+            Cli::try_parse_from(std::iter::once("l3p").chain(args.iter().copied()))
+                .unwrap_or_else(|e| panic!("{args:?}: {e}"))
+        };
+        let cli = parse(&[
+            "export",
+            "run-a1@latest",
+            "--output",
+            "out",
+            "--data-dir",
+            "d",
+        ]);
+        let Command::Export(export) = cli.command else {
+            panic!("not export");
+        };
+        assert_eq!(export.data.as_deref(), Some(std::path::Path::new("d")));
+        for args in [
+            &["registry", "list", "--data-dir", "d"][..],
+            &["registry", "serve", "--data-dir", "d"][..],
+            &["export", "x@1", "--output", "o", "--data", "d"][..],
+        ] {
+            parse(args);
+        }
+    }
+}

@@ -31,7 +31,7 @@ pub struct Target {
     #[command(flatten)]
     pub net: NetArgs,
     /// Read and write `<dir>/registry.db` directly instead of asking a service.
-    #[arg(long)]
+    #[arg(long, visible_alias = "data-dir")]
     pub data: Option<PathBuf>,
 }
 
@@ -40,7 +40,7 @@ pub enum RegistryCommand {
     /// Serve the registry over Zenoh until Ctrl-C.
     Serve {
         /// Data directory holding registry.db.
-        #[arg(long, default_value = "l3p-data")]
+        #[arg(long, visible_alias = "data-dir", default_value = "l3p-data")]
         data: PathBuf,
         /// Endpoints to listen on (repeatable); default tcp/127.0.0.1:7447 without --config.
         #[arg(long)]
