@@ -212,9 +212,13 @@ impl ExperimentSpec {
             return Err("experiment.envs and experiment.threads must be >= 1".into());
         }
         for (stage, s) in [("pretrain", &self.pretrain), ("targets", &self.targets)] {
-            if s.robots.is_empty() || s.methods.is_empty() {
+            // `[targets]` may be empty as a whole: a pretraining-only experiment (an ablation).
+            let pretraining_only =
+                stage == "targets" && s.robots.is_empty() && s.methods.is_empty();
+            if (s.robots.is_empty() || s.methods.is_empty()) && !pretraining_only {
                 return Err(format!(
-                    "{stage}.robots and {stage}.methods must not be empty"
+                    "{stage}.robots and {stage}.methods must not be empty (an experiment \
+                     without targets leaves both empty)"
                 ));
             }
             if s.iterations == 0 {

@@ -219,6 +219,30 @@ fn bad_variants_are_refused() {
     );
 }
 
+/// An ablation pretrains only: `[targets]` empty as a whole, the variants' cores as arms.
+#[test]
+fn an_experiment_without_targets_plans_only_pretraining() {
+    let text = MICRO
+        .replace(r#"robots = ["go1", "anymal_c"]"#, "robots = []")
+        .replace(
+            r#"methods = ["l3p", "l3p-transfer", "mlp-transfer"]"#,
+            "methods = []",
+        )
+        + "[[variants]]\nname = \"dh8\"\npretrain_methods = [\"l3p\"]\nd_h = 8\n";
+    let spec = spec(&text);
+    spec.validate().unwrap();
+    let arms = plan(&spec, &base()).unwrap();
+    // 2 methods × 2 seeds of the main pretraining, then dh8's l3p core × 2 seeds.
+    assert_eq!(arms.len(), 6);
+    assert!(arms.iter().all(|a| a.stage == Stage::Pretrain), "{arms:?}");
+    assert_eq!(
+        arms.iter()
+            .filter(|a| a.variant.as_deref() == Some("dh8"))
+            .count(),
+        2
+    );
+}
+
 #[test]
 fn bad_specs_are_refused_with_the_key_named() {
     let cases = [
@@ -246,6 +270,10 @@ fn bad_specs_are_refused_with_the_key_named() {
         (
             MICRO.replace(r#"name = "micro""#, r#"name = "a/b""#),
             "experiment.name",
+        ),
+        (
+            MICRO.replace(r#"robots = ["go1", "anymal_c"]"#, "robots = []"),
+            "targets.robots and targets.methods must not be empty",
         ),
     ];
     for (text, want) in cases {
