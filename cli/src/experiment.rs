@@ -423,8 +423,16 @@ pub fn plan(spec: &ExperimentSpec, base: &Config) -> anyhow::Result<Vec<Arm>> {
             .depends_on
             .as_ref()
             .map(|p| final_checkpoint(&dir.join(p).join(p)));
-        if let Some(t) = r.terrain {
-            config.env.terrain = l3p_robots::config::TerrainConfig::with_preset(t);
+        // The base config's own preset keeps its tuning (a recipe's box heights, noise, edge
+        // fix); another preset starts from that preset's defaults, keeping only the edge fix (a
+        // simulator correction, not a terrain choice).
+        if let Some(t) = r.terrain
+            && t != base.env.terrain.preset
+        {
+            config.env.terrain = l3p_robots::config::TerrainConfig {
+                fix_internal_edges: base.env.terrain.fix_internal_edges,
+                ..l3p_robots::config::TerrainConfig::with_preset(t)
+            };
             config.env.height_scan = t != TerrainPreset::Flat;
         }
         let mut arm_envs = envs;

@@ -219,6 +219,30 @@ fn bad_variants_are_refused() {
     );
 }
 
+/// A stage on the base config's own terrain preset keeps the recipe's terrain tuning; another
+/// preset starts from its defaults but keeps the heightfield edge fix.
+#[test]
+fn a_stage_on_the_base_preset_keeps_the_recipes_terrain() {
+    let mut base = base();
+    base.env.terrain.preset = TerrainPreset::Curriculum;
+    base.env.terrain.boxes_height = Some([0.025, 0.1]);
+    base.env.terrain.fix_internal_edges = true;
+    base.env.height_scan = true;
+    let text = MICRO.replace(
+        "iterations = 30\n",
+        "iterations = 30\nterrain = \"curriculum\"\n",
+    );
+    let text = text.replace(r#"terrain = "flat""#, r#"terrain = "simple-rough""#);
+    let arms = plan(&spec(&text), &base).unwrap();
+    let pretrain = arms.iter().find(|a| a.stage == Stage::Pretrain).unwrap();
+    assert_eq!(pretrain.config.env.terrain, base.env.terrain);
+    let target = arms.iter().find(|a| a.stage == Stage::Target).unwrap();
+    let terrain = &target.config.env.terrain;
+    assert_eq!(terrain.preset, TerrainPreset::SimpleRough);
+    assert_eq!(terrain.boxes_height, None);
+    assert!(terrain.fix_internal_edges);
+}
+
 /// An ablation pretrains only: `[targets]` empty as a whole, the variants' cores as arms.
 #[test]
 fn an_experiment_without_targets_plans_only_pretraining() {
