@@ -267,14 +267,12 @@ impl Procs {
             .output()
             .map(|o| String::from_utf8_lossy(&o.stdout).into_owned())
             .unwrap_or_else(|e| format!("gdb: {e}"));
-        let tail: String = gdb
-            .chars()
+        // The last 20,000 characters: the main thread's stack comes last.
+        let tail = gdb
+            .char_indices()
             .rev()
-            .take(20_000)
-            .collect::<Vec<_>>()
-            .into_iter()
-            .rev()
-            .collect();
+            .nth(20_000)
+            .map_or(gdb.as_str(), |(i, _)| &gdb[i..]);
         format!("pid {pid}, alive: {alive}\n{tail}")
     }
 

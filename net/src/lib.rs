@@ -95,10 +95,7 @@ impl ZenohSettings {
                 .iter()
                 .map(|p| format!("tcp/127.0.0.1:{p}"))
                 .collect(),
-            multicast_scouting: false,
-            connect_retry_s: DEFAULT_CONNECT_RETRY_S,
-            config_file: None,
-            tls: None,
+            ..Self::default()
         }
     }
 
