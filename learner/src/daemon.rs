@@ -378,6 +378,9 @@ fn update_metrics(record: &mut MetricsRecord, m: &UpdateMetrics) {
 
 /// Run the learner daemon until `max_iterations`, cancellation, or a fatal error. `progress`
 /// receives a report after each update.
+///
+/// This is the Zenoh wiring: the gather rule is `Gather`, and what leaves the learner after an
+/// update (weights, announce, metrics, checkpoints) is `Outputs`.
 pub async fn run(
     session: Session,
     opts: LearnerOptions,
@@ -389,33 +392,20 @@ pub async fn run(
         path: opts.run_dir.clone(),
         source,
     })?;
-    let metrics_file = metrics_path(&opts.run_dir);
-    // TensorBoard scalars beside metrics.jsonl; a failure to write them costs the curves, never
-    // the run.
-    let mut tensorboard = match crate::tensorboard::EventWriter::create(&opts.run_dir) {
-        Ok(w) => Some(w),
-        Err(e) => {
-            warn!(dir = %opts.run_dir.display(), "no TensorBoard events for this run: {e}");
-            None
-        }
-    };
-    let run = opts.run.clone();
-
     let registry = opts
         .use_registry
         .then(|| l3p_registry_client::RegistryClient::new(&session));
     let from_registry = match &registry {
         Some(client) if !checkpoint_path(&opts.run_dir).exists() => client
-            .try_get_blob(&format!("{}@latest", checkpoint_artifact(&run)))
+            .try_get_blob(&format!("{}@latest", checkpoint_artifact(&opts.run)))
             .await?
             .map(|(_, bytes)| bytes),
         _ => None,
     };
     let mut ppo = start_ppo(&opts, from_registry)?;
-    let uploader = registry.map(RegistryUploader::spawn);
-    let published = Arc::new(RwLock::new(Published::default()));
-    let mut weights = publish_weights(&ppo, &run, &opts.robots, &published)?;
-    let serve = spawn_weights_server(&session, &run, published.clone(), cancel.clone()).await?;
+    let mut out = Outputs::new(&session, &opts, &ppo, registry, progress)?;
+    let serve =
+        spawn_weights_server(&session, &opts.run, out.published.clone(), cancel.clone()).await?;
 
     // Events: rollout chunks and actor liveliness, funnelled into one bounded channel. When the loop
     // is busy updating, the channel fills and Zenoh's Block congestion control pushes back on actors.
@@ -424,9 +414,8 @@ pub async fn run(
     let contract = ChunkContract::of(&opts);
     let chunk_task =
         spawn_chunk_intake(&session, contract, tx.clone(), decode_seconds.clone()).await?;
-    let live_task = spawn_liveliness_watch(&session, &run, tx).await?;
+    let live_task = spawn_liveliness_watch(&session, &opts.run, tx).await?;
 
-    let announce_key = keys::policy_announce(&run);
     // Seconds on this process's monotonic clock, for the gather rule.
     let clock = Instant::now();
     let now_s = || clock.elapsed().as_secs_f64();
@@ -437,19 +426,8 @@ pub async fn run(
         now_s(),
     );
     let mut rejected = 0u64;
-    let mut checkpoints = CheckpointSchedule::new(&opts.daemon, ppo.iteration());
     let max_iterations = opts.daemon.max_iterations;
     let mut tick = tokio::time::interval(Duration::from_millis(500));
-    let incarnation = unix_ms();
-    let announce = |version: u64, weights: &Vec<RobotWeights>| PolicyAnnounce {
-        wire_version: WIRE_VERSION,
-        run: run.clone(),
-        version,
-        incarnation,
-        mode: opts.ppo.mode.as_str().to_string(),
-        robots: weights.clone(),
-        max_policy_lag: opts.daemon.max_policy_lag,
-    };
 
     let outcome: Result<(), DaemonError> = loop {
         if max_iterations > 0 && ppo.iteration() >= max_iterations {
@@ -459,26 +437,11 @@ pub async fn run(
         let version = ppo.iteration();
         tokio::select! {
             _ = cancel.cancelled() => break Ok(()),
-            _ = tick.tick() => {
-                let message = announce(version, &weights);
-                let json = codec::encode_json(&message).map_err(zerr)?;
-                if let Err(e) = session.put(&announce_key, json).await {
-                    warn!("cannot announce policy {version}: {e}");
-                }
-            }
+            _ = tick.tick() => out.announce(version).await?,
             event = events.recv() => match event {
                 None => break Err(DaemonError::Zenoh("subscriptions closed".into())),
                 Some(Event::Rejected) => rejected += 1,
-                Some(Event::ActorUp(id)) => { info!(actor = %id, "actor joined"); gather.actor_up(id); }
-                Some(Event::ActorDown(id)) => { info!(actor = %id, "actor left"); gather.actor_down(&id); }
-                Some(Event::Chunk(chunk)) => {
-                    let (actor, chunk_version) = (actor_key(&chunk), chunk.policy_version);
-                    match gather.chunk(*chunk, version) {
-                        ChunkFate::Stale => debug!(%actor, chunk_version, version, "dropped stale chunk"),
-                        ChunkFate::ReplacedOlder => debug!(%actor, "replaced an older chunk of the same actor"),
-                        ChunkFate::Accepted => {}
-                    }
-                }
+                Some(event) => route_event(&mut gather, event, version),
             },
         }
 
@@ -514,15 +477,7 @@ pub async fn run(
             Ok(ok) => ok,
             Err(e) => break Err(e.into()),
         };
-        let w_start = Instant::now();
-        weights = publish_weights(&ppo, &run, &opts.robots, &published)?;
-        let weights_seconds = w_start.elapsed().as_secs_f64();
-        let new_version = ppo.iteration();
-        let json = codec::encode_json(&announce(new_version, &weights)).map_err(zerr)?;
-        if let Err(e) = session.put(&announce_key, json).await {
-            warn!("cannot announce policy {new_version}: {e}");
-        }
-
+        let weights_seconds = out.publish(&ppo).await?;
         let iteration_seconds = waited + iteration_start.elapsed().as_secs_f64();
         // The next gather (its wait and its timeout) starts now that the policy is out, not when
         // this update began: counting the update in both made `iteration_seconds` (and so
@@ -537,58 +492,17 @@ pub async fn run(
             dropped_chunks: gather.dropped(),
             rejected_chunks: rejected,
             silent_actors: gather.silent(),
-            registry: uploader.as_ref().map(|u| {
+            registry: out.uploader.as_ref().map(|u| {
                 let stats = u.stats();
                 [stats.backlog(), stats.failed_attempts(), stats.dropped()]
             }),
         };
-        let record = iteration_record(
-            &run,
-            new_version,
-            &update,
-            &chunks,
-            iteration_seconds,
-            decode + weights_seconds,
-            &counters,
-        );
-        emit_metrics(&session, &metrics_file, &record).await?;
-        if let Some(w) = &mut tensorboard
-            && let Err(e) = w.write(&record)
-        {
-            warn!(path = %w.path().display(), "TensorBoard events stopped: {e}");
-            tensorboard = None;
-        }
-        if let Some(to_registry) = checkpoints.due(new_version, uploader.is_some()) {
-            let target = uploader.as_ref().filter(|_| to_registry);
-            save_checkpoint(&ppo, &opts, target, &record)?;
-            checkpoints.written(new_version, to_registry);
-        }
-        if let Some(progress) = &progress {
-            let _ = progress.send(IterationReport {
-                iteration: new_version,
-                max_iterations,
-                metrics: record,
-            });
-        }
+        let timing = (iteration_seconds, decode + weights_seconds);
+        out.record_iteration(&ppo, &update, &chunks, timing, &counters)
+            .await?;
     };
 
-    // Final checkpoint, whatever stopped us.
-    let file_exists = checkpoint_path(&opts.run_dir).exists();
-    if checkpoints.final_due(ppo.iteration(), file_exists, uploader.is_some()) {
-        let record = MetricsRecord::new(&run, "learner", ppo.iteration(), unix_ms());
-        save_checkpoint(&ppo, &opts, uploader.as_ref(), &record)?;
-        info!(iteration = ppo.iteration(), "final checkpoint written");
-    }
-    if let Some(uploader) = uploader {
-        let left = uploader.finish(FINAL_UPLOAD_DEADLINE).await;
-        if left > 0 {
-            warn!(
-                left,
-                checkpoint = %checkpoint_path(&opts.run_dir).display(),
-                "registry unreachable: uploads not stored; the local checkpoint has the state"
-            );
-        }
-    }
+    out.finish(&ppo).await?;
     cancel.cancel();
     chunk_task.abort();
     live_task.abort();
@@ -599,6 +513,183 @@ pub async fn run(
         dropped_chunks: gather.dropped(),
         rejected_chunks: rejected,
     })
+}
+
+/// A chunk or a liveliness change, handed to the gather rule.
+fn route_event(gather: &mut Gather, event: Event, version: u64) {
+    match event {
+        Event::ActorUp(id) => {
+            info!(actor = %id, "actor joined");
+            gather.actor_up(id);
+        }
+        Event::ActorDown(id) => {
+            info!(actor = %id, "actor left");
+            gather.actor_down(&id);
+        }
+        Event::Chunk(chunk) => {
+            let (actor, chunk_version) = (actor_key(&chunk), chunk.policy_version);
+            match gather.chunk(*chunk, version) {
+                ChunkFate::Stale => debug!(%actor, chunk_version, version, "dropped stale chunk"),
+                ChunkFate::ReplacedOlder => {
+                    debug!(%actor, "replaced an older chunk of the same actor")
+                }
+                ChunkFate::Accepted => {}
+            }
+        }
+        Event::Rejected => {}
+    }
+}
+
+/// Everything that leaves the learner: the served weights and their announce, the metrics file,
+/// TensorBoard events and Zenoh metrics, checkpoints (local and registry) and progress reports.
+struct Outputs<'a> {
+    session: &'a Session,
+    opts: &'a LearnerOptions,
+    announce_key: String,
+    /// Distinguishes this learner process from an earlier one of the same run (for actors).
+    incarnation: u64,
+    published: Arc<RwLock<Published>>,
+    /// What the current announce lists (one entry per robot).
+    weights: Vec<RobotWeights>,
+    metrics_file: PathBuf,
+    tensorboard: Option<crate::tensorboard::EventWriter>,
+    uploader: Option<RegistryUploader>,
+    checkpoints: CheckpointSchedule,
+    progress: Option<mpsc::UnboundedSender<IterationReport>>,
+}
+
+impl<'a> Outputs<'a> {
+    /// Publishes `ppo`'s weights (served from now on) and opens the metrics outputs.
+    fn new(
+        session: &'a Session,
+        opts: &'a LearnerOptions,
+        ppo: &Ppo,
+        registry: Option<l3p_registry_client::RegistryClient>,
+        progress: Option<mpsc::UnboundedSender<IterationReport>>,
+    ) -> Result<Self, DaemonError> {
+        // TensorBoard scalars beside metrics.jsonl; a failure to write them costs the curves,
+        // never the run.
+        let tensorboard = match crate::tensorboard::EventWriter::create(&opts.run_dir) {
+            Ok(w) => Some(w),
+            Err(e) => {
+                warn!(dir = %opts.run_dir.display(), "no TensorBoard events for this run: {e}");
+                None
+            }
+        };
+        let published = Arc::new(RwLock::new(Published::default()));
+        let weights = publish_weights(ppo, &opts.run, &opts.robots, &published)?;
+        Ok(Outputs {
+            session,
+            opts,
+            announce_key: keys::policy_announce(&opts.run),
+            incarnation: unix_ms(),
+            published,
+            weights,
+            metrics_file: metrics_path(&opts.run_dir),
+            tensorboard,
+            uploader: registry.map(RegistryUploader::spawn),
+            checkpoints: CheckpointSchedule::new(&opts.daemon, ppo.iteration()),
+            progress,
+        })
+    }
+
+    /// Announces `version` with the current weights; a failed put is logged, not fatal.
+    async fn announce(&self, version: u64) -> Result<(), DaemonError> {
+        let message = PolicyAnnounce {
+            wire_version: WIRE_VERSION,
+            run: self.opts.run.clone(),
+            version,
+            incarnation: self.incarnation,
+            mode: self.opts.ppo.mode.as_str().to_string(),
+            robots: self.weights.clone(),
+            max_policy_lag: self.opts.daemon.max_policy_lag,
+        };
+        let json = codec::encode_json(&message).map_err(zerr)?;
+        if let Err(e) = self.session.put(&self.announce_key, json).await {
+            warn!("cannot announce policy {version}: {e}");
+        }
+        Ok(())
+    }
+
+    /// Serves and announces the updated policy; returns the seconds spent encoding its weights.
+    async fn publish(&mut self, ppo: &Ppo) -> Result<f64, DaemonError> {
+        let start = Instant::now();
+        self.weights = publish_weights(ppo, &self.opts.run, &self.opts.robots, &self.published)?;
+        let seconds = start.elapsed().as_secs_f64();
+        self.announce(ppo.iteration()).await?;
+        Ok(seconds)
+    }
+
+    /// After an update: the iteration's metrics record (file, Zenoh, TensorBoard), a checkpoint
+    /// when one is due, and a progress report. `timing` is (iteration seconds, learner transport
+    /// seconds).
+    async fn record_iteration(
+        &mut self,
+        ppo: &Ppo,
+        update: &UpdateMetrics,
+        chunks: &[RolloutChunk],
+        timing: (f64, f64),
+        counters: &LoopCounters,
+    ) -> Result<(), DaemonError> {
+        let version = ppo.iteration();
+        let (iteration_seconds, transport_seconds) = timing;
+        let record = iteration_record(
+            &self.opts.run,
+            version,
+            update,
+            chunks,
+            iteration_seconds,
+            transport_seconds,
+            counters,
+        );
+        emit_metrics(self.session, &self.metrics_file, &record).await?;
+        if let Some(w) = &mut self.tensorboard
+            && let Err(e) = w.write(&record)
+        {
+            warn!(path = %w.path().display(), "TensorBoard events stopped: {e}");
+            self.tensorboard = None;
+        }
+        if let Some(to_registry) = self.checkpoints.due(version, self.uploader.is_some()) {
+            let target = self.uploader.as_ref().filter(|_| to_registry);
+            save_checkpoint(ppo, self.opts, target, &record)?;
+            self.checkpoints.written(version, to_registry);
+        }
+        if let Some(progress) = &self.progress {
+            let _ = progress.send(IterationReport {
+                iteration: version,
+                max_iterations: self.opts.daemon.max_iterations,
+                metrics: record,
+            });
+        }
+        Ok(())
+    }
+
+    /// At shutdown, whatever stopped the loop: the final checkpoint, and the queued registry
+    /// uploads given [`FINAL_UPLOAD_DEADLINE`].
+    async fn finish(self, ppo: &Ppo) -> Result<(), DaemonError> {
+        let opts = self.opts;
+        let file_exists = checkpoint_path(&opts.run_dir).exists();
+        let has_registry = self.uploader.is_some();
+        if self
+            .checkpoints
+            .final_due(ppo.iteration(), file_exists, has_registry)
+        {
+            let record = MetricsRecord::new(&opts.run, "learner", ppo.iteration(), unix_ms());
+            save_checkpoint(ppo, opts, self.uploader.as_ref(), &record)?;
+            info!(iteration = ppo.iteration(), "final checkpoint written");
+        }
+        if let Some(uploader) = self.uploader {
+            let left = uploader.finish(FINAL_UPLOAD_DEADLINE).await;
+            if left > 0 {
+                warn!(
+                    left,
+                    checkpoint = %checkpoint_path(&opts.run_dir).display(),
+                    "registry unreachable: uploads not stored; the local checkpoint has the state"
+                );
+            }
+        }
+        Ok(())
+    }
 }
 
 /// When to write checkpoints: every `checkpoint_every` iterations locally, every
