@@ -6,6 +6,9 @@
 #
 #   experiments/archive.sh pack   l3p-data/experiments/laptop docs/experiments/<date>-laptop/arms.tar.gz
 #   experiments/archive.sh unpack docs/experiments/<date>-laptop/arms.tar.gz l3p-data/experiments/laptop
+#
+# ARCHIVE_CHECKPOINTS=0 leaves the checkpoints out (≈ 1.3 MB per arm): for an experiment with no
+# transfer arms (the ablation) nothing resumes from them, and the report needs only the metrics.
 set -euo pipefail
 mode=${1:?pack|unpack}; from=${2:?source}; to=${3:?destination}
 case "$mode" in
@@ -18,7 +21,9 @@ case "$mode" in
         arm=${done%/done.json}
         echo "$done"
         echo "$arm/$arm/metrics.jsonl"
-        case "$arm" in pretrain-*) echo "$arm/$arm/checkpoints/latest.ckpt" ;; esac
+        if [ "${ARCHIVE_CHECKPOINTS:-1}" != 0 ]; then
+          case "$arm" in pretrain-*) echo "$arm/$arm/checkpoints/latest.ckpt" ;; esac
+        fi
       done
     ) > "$list"
     mkdir -p "$(dirname "$to")"
