@@ -385,6 +385,30 @@ pub async fn fetch_policy(
     Err(fail(last_error))
 }
 
+/// An actor's metrics for one chunk: collection speed, the transport split, the collector's stage
+/// times, and the episodes' and reward terms' means.
+fn chunk_metrics<E: RolloutEnv>(
+    record: &mut MetricsRecord,
+    ch: &RolloutChunk,
+    col: &Collector<E>,
+    fetch_seconds: f64,
+    send_seconds: f64,
+) {
+    record.insert("collect_seconds", ch.collect_seconds as f64);
+    record.insert(
+        "steps_per_second",
+        ch.samples() as f64 / (ch.collect_seconds as f64).max(1e-9),
+    );
+    record.insert("send_seconds", send_seconds);
+    record.insert("fetch_seconds", fetch_seconds);
+    record.insert("time/inference_seconds", col.inference_seconds);
+    for (stage, seconds) in &col.stage_seconds {
+        record.insert(&format!("time/{stage}_seconds"), *seconds);
+    }
+    record.insert_episode_means(&ch.episodes);
+    record.insert_reward_term_means([(ch.reward_terms.as_slice(), ch.episodes.as_slice())]);
+}
+
 /// Run the actor daemon until cancelled (or `max_chunks`).
 pub async fn run<E: RolloutEnv>(
     session: Session,
@@ -497,19 +521,7 @@ pub async fn run<E: RolloutEnv>(
         last_send_seconds = send_seconds;
 
         let mut record = MetricsRecord::new(&opts.run, &metrics_source, version, unix_ms());
-        record.insert("collect_seconds", ch.collect_seconds as f64);
-        record.insert(
-            "steps_per_second",
-            ch.samples() as f64 / (ch.collect_seconds as f64).max(1e-9),
-        );
-        record.insert("send_seconds", send_seconds);
-        record.insert("fetch_seconds", fetch_seconds);
-        record.insert("time/inference_seconds", col.inference_seconds);
-        for (stage, seconds) in &col.stage_seconds {
-            record.insert(&format!("time/{stage}_seconds"), *seconds);
-        }
-        record.insert_episode_means(&ch.episodes);
-        record.insert_reward_term_means([(ch.reward_terms.as_slice(), ch.episodes.as_slice())]);
+        chunk_metrics(&mut record, &ch, &col, fetch_seconds, send_seconds);
         if let Ok(json) = codec::encode_json(&record) {
             let _ = session.put(&metrics_key, json).await;
         }

@@ -123,19 +123,17 @@ pub async fn run_sim_robot(
         let publish_every = (200 / opts.state_hz) as u64;
         let mut pacer = Pacer::new(physics_dt);
         let start = Instant::now();
-        let mut summary = SimRobotSummary {
+        let mut tally = Tally::new(SimRobotSummary {
             robot: robot.name.into(),
             policy_min_base_height: f32::INFINITY,
             nominal_base_height: nominal,
             ..Default::default()
-        };
+        });
         let mut state = SimState::default();
         let mut applied_seq = None;
         let mut timed_out = false;
-        let mut policy_start: Option<[f32; 3]> = None;
         let mut seq = 0u64;
         let mut step = 0u64;
-        let mut height_sum = 0.0f64;
         let timeout = Duration::from_secs_f32(opts.command_timeout_s);
         while !cancel.is_cancelled() && opts.duration.is_none_or(|d| start.elapsed() < d) {
             let (now, _) = pacer.wait();
@@ -145,7 +143,7 @@ pub async fn run_sim_robot(
                 if now.saturating_duration_since(at) > timeout {
                     if !timed_out {
                         timed_out = true;
-                        summary.command_timeouts += 1;
+                        tally.summary.command_timeouts += 1;
                         warn!("no command for {:?}: damping", timeout);
                         let damp = Actuator::from_spec(
                             robot,
@@ -175,59 +173,20 @@ pub async fn run_sim_robot(
             sim.step();
             sim.read_state(0, &mut state);
             step += 1;
-            match mode {
-                ControlMode::ZeroTorque => summary.steps_zero_torque += 1,
-                ControlMode::Ramp => summary.steps_ramp += 1,
-                ControlMode::Policy => summary.steps_policy += 1,
-                ControlMode::Damping => summary.steps_damping += 1,
-            }
-            if mode == ControlMode::Policy {
-                let start_pos = *policy_start.get_or_insert(state.base_pos);
-                summary.policy_seconds += cfg.dt as f64;
-                height_sum += state.base_pos[2] as f64;
-                summary.policy_min_base_height =
-                    summary.policy_min_base_height.min(state.base_pos[2]);
-                summary.policy_max_tilt_deg = summary
-                    .policy_max_tilt_deg
-                    .max(tilt_degrees(state.base_quat));
-                summary.policy_displacement = [
-                    state.base_pos[0] - start_pos[0],
-                    state.base_pos[1] - start_pos[1],
-                ];
-            }
+            tally.step(mode, &state, cfg.dt);
             if step.is_multiple_of(publish_every) {
                 seq += 1;
-                let msg = RobotState {
-                    wire_version: WIRE_VERSION,
-                    robot_id: opts.robot_id.clone(),
-                    seq,
-                    stamp_ns: now_unix_ns(),
-                    base_quat: state.base_quat,
-                    base_lin_vel: state.lin_vel_b(),
-                    base_ang_vel: state.ang_vel_b(),
-                    joint_pos: state.joint_pos.to_vec(),
-                    joint_vel: state.joint_vel.to_vec(),
-                    command: opts.command,
-                };
-                match codec::encode(&msg) {
+                match codec::encode(&state_message(&opts, seq, &state)) {
                     Ok(bytes) => {
                         if states.put(bytes).wait().is_ok() {
-                            summary.states_published += 1;
+                            tally.summary.states_published += 1;
                         }
                     }
                     Err(e) => warn!("cannot encode state: {e}"),
                 }
             }
         }
-        summary.seconds = start.elapsed().as_secs_f64();
-        if summary.policy_seconds > 0.0 {
-            summary.policy_mean_forward_velocity =
-                summary.policy_displacement[0] / summary.policy_seconds as f32;
-            summary.policy_mean_base_height =
-                (height_sum / summary.steps_policy.max(1) as f64) as f32;
-        } else {
-            summary.policy_min_base_height = 0.0;
-        }
+        let mut summary = tally.finish(start.elapsed().as_secs_f64());
         summary.commands_received = commands.accepted();
         summary.commands_rejected = commands.rejected();
         summary
@@ -235,4 +194,138 @@ pub async fn run_sim_robot(
     .await
     .map_err(|e| DeployError::Config(format!("sim-robot thread: {e}")))?;
     Ok(summary)
+}
+
+/// The state message a sim-robot publishes (`seq` counts messages, not physics steps).
+fn state_message(opts: &SimRobotOptions, seq: u64, state: &SimState) -> RobotState {
+    RobotState {
+        wire_version: WIRE_VERSION,
+        robot_id: opts.robot_id.clone(),
+        seq,
+        stamp_ns: now_unix_ns(),
+        base_quat: state.base_quat,
+        base_lin_vel: state.lin_vel_b(),
+        base_ang_vel: state.ang_vel_b(),
+        joint_pos: state.joint_pos.to_vec(),
+        joint_vel: state.joint_vel.to_vec(),
+        command: opts.command,
+    }
+}
+
+/// The summary, counted physics step by physics step.
+struct Tally {
+    summary: SimRobotSummary,
+    /// Base position when the policy first took control.
+    policy_start: Option<[f32; 3]>,
+    height_sum: f64,
+}
+
+impl Tally {
+    fn new(summary: SimRobotSummary) -> Self {
+        Tally {
+            summary,
+            policy_start: None,
+            height_sum: 0.0,
+        }
+    }
+
+    /// One physics step of `dt` seconds in `mode`, ending in `state`.
+    fn step(&mut self, mode: ControlMode, state: &SimState, dt: f32) {
+        let summary = &mut self.summary;
+        match mode {
+            ControlMode::ZeroTorque => summary.steps_zero_torque += 1,
+            ControlMode::Ramp => summary.steps_ramp += 1,
+            ControlMode::Policy => summary.steps_policy += 1,
+            ControlMode::Damping => summary.steps_damping += 1,
+        }
+        if mode == ControlMode::Policy {
+            let start_pos = *self.policy_start.get_or_insert(state.base_pos);
+            summary.policy_seconds += dt as f64;
+            self.height_sum += state.base_pos[2] as f64;
+            summary.policy_min_base_height = summary.policy_min_base_height.min(state.base_pos[2]);
+            summary.policy_max_tilt_deg = summary
+                .policy_max_tilt_deg
+                .max(tilt_degrees(state.base_quat));
+            summary.policy_displacement = [
+                state.base_pos[0] - start_pos[0],
+                state.base_pos[1] - start_pos[1],
+            ];
+        }
+    }
+
+    /// The summary after `seconds` of wall-clock: the policy's means (or a zero minimum height
+    /// when the policy never ran).
+    fn finish(self, seconds: f64) -> SimRobotSummary {
+        let mut summary = self.summary;
+        summary.seconds = seconds;
+        if summary.policy_seconds > 0.0 {
+            summary.policy_mean_forward_velocity =
+                summary.policy_displacement[0] / summary.policy_seconds as f32;
+            summary.policy_mean_base_height =
+                (self.height_sum / summary.steps_policy.max(1) as f64) as f32;
+        } else {
+            summary.policy_min_base_height = 0.0;
+        }
+        summary
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn at(x: f32, z: f32) -> SimState {
+        let mut state = SimState::default();
+        state.base_pos = [x, 0.0, z];
+        state
+    }
+
+    #[test]
+    fn the_tally_counts_modes_and_measures_only_the_policy_steps() {
+        let mut tally = Tally::new(SimRobotSummary {
+            policy_min_base_height: f32::INFINITY,
+            ..Default::default()
+        });
+        tally.step(ControlMode::ZeroTorque, &at(5.0, 0.1), 0.005);
+        tally.step(ControlMode::Ramp, &at(5.0, 0.2), 0.005);
+        // Two seconds of policy: 1 m forward, heights 0.30 and 0.26.
+        tally.step(ControlMode::Policy, &at(1.0, 0.30), 1.0);
+        tally.step(ControlMode::Policy, &at(2.0, 0.26), 1.0);
+        tally.step(ControlMode::Damping, &at(9.0, 0.05), 0.005);
+        let s = tally.finish(3.0);
+        assert_eq!(
+            (
+                s.steps_zero_torque,
+                s.steps_ramp,
+                s.steps_policy,
+                s.steps_damping
+            ),
+            (1, 1, 2, 1)
+        );
+        assert_eq!(s.policy_seconds, 2.0);
+        assert_eq!(
+            s.policy_displacement,
+            [1.0, 0.0],
+            "from where the policy took over"
+        );
+        assert_eq!(s.policy_mean_forward_velocity, 0.5);
+        assert!((s.policy_mean_base_height - 0.28).abs() < 1e-6);
+        assert_eq!(
+            s.policy_min_base_height, 0.26,
+            "the damping step's 0.05 is not the policy's"
+        );
+        assert_eq!(s.seconds, 3.0);
+    }
+
+    #[test]
+    fn without_policy_steps_the_minimum_height_is_zero_not_infinite() {
+        let mut tally = Tally::new(SimRobotSummary {
+            policy_min_base_height: f32::INFINITY,
+            ..Default::default()
+        });
+        tally.step(ControlMode::ZeroTorque, &at(0.0, 0.3), 0.005);
+        let s = tally.finish(1.0);
+        assert_eq!(s.policy_min_base_height, 0.0);
+        assert_eq!(s.policy_mean_forward_velocity, 0.0);
+    }
 }
