@@ -1,0 +1,99 @@
+#!/usr/bin/env python3
+"""Samples to a common bar: for each target robot, the first iteration at which each arm's episode
+reward (10-iteration moving average, the report's smoothing) reaches a share of what the
+from-scratch arm of its family ends at (L3P for l3p-transfer and its variants, MLP for
+mlp-transfer; final = mean of the last 5% of iterations, mean over seeds).
+
+The report's 85% / 95% convergence measures each curve against its own final value, so an arm
+that flattens early at a low reward "converges" fast. This asks the paper's question directly: how
+many iterations does the transferred policy need to get where training from scratch gets?
+
+    experiments/time-to-reward.py <experiment data dir> [share=1.0 ...]
+    # e.g. experiments/time-to-reward.py l3p-data/experiments/laptop 0.5 0.8 1.0
+
+Output: a Markdown table per share; "—" = not reached within the arm's iterations (counted
+as the arm's length in the mean, so a mean with "—" is a lower bound, marked ≥).
+"""
+import glob
+import json
+import os
+import re
+import statistics
+import sys
+
+SMOOTH = 10
+
+
+def rewards(metrics):
+    rows = [json.loads(line) for line in open(metrics)]
+    rows = [r for r in rows if r.get("source") == "learner"]
+    return [r["values"].get("episode_return") for r in rows]
+
+
+def moving_average(values):
+    out, window = [], []
+    for v in values:
+        if v is not None:
+            window.append(v)
+            window = window[-SMOOTH:]
+        out.append(sum(window) / len(window) if window else float("nan"))
+    return out
+
+
+def final(values):
+    v = [x for x in values if x is not None]
+    n = max(1, round(len(v) * 0.05))
+    return sum(v[-n:]) / n
+
+
+def first_reaching(curve, bar):
+    for i, v in enumerate(curve):
+        if v >= bar:
+            return i + 1
+    return None
+
+
+def main():
+    data = sys.argv[1]
+    shares = [float(s) for s in sys.argv[2:]] or [1.0]
+    arms = {}
+    for done in sorted(glob.glob(os.path.join(data, "*", "done.json"))):
+        arm = os.path.basename(os.path.dirname(done))
+        if arm.startswith("pretrain-"):
+            continue
+        m = re.fullmatch(r"(.+?)-(mlp|l3p)(-transfer)?(?:-(\w+))?-s(\d+)", arm)
+        if not m:
+            continue
+        robot, family, transfer, variant, seed = m.groups()
+        method = family + (transfer or "") + (f" [{variant}]" if variant else "")
+        values = rewards(os.path.join(data, arm, arm, "metrics.jsonl"))
+        arms.setdefault((robot, family, method), []).append(values)
+
+    for share in shares:
+        print(f"\n### Iterations to {share:.0%} of the from-scratch final reward\n")
+        print("| robot | method | bar (reward) | iterations (mean over seeds) | per seed | vs scratch |")
+        print("|---|---|---|---|---|---|")
+        for robot in sorted({k[0] for k in arms}):
+            for family in ("l3p", "mlp"):
+                scratch = arms.get((robot, family, family))
+                if not scratch:
+                    continue
+                bar = share * statistics.mean(final(v) for v in scratch)
+                scratch_mean = None
+                for (r, f, method), runs in sorted(arms.items()):
+                    if r != robot or f != family:
+                        continue
+                    hits = [first_reaching(moving_average(v), bar) for v in runs]
+                    counted = [h if h is not None else len(v) for h, v in zip(hits, runs)]
+                    mean = statistics.mean(counted)
+                    bound = "≥ " if None in hits else ""
+                    if method == family:
+                        scratch_mean = mean
+                    ratio = (f"{scratch_mean / mean:.2f}×" if scratch_mean and method != family
+                             else "")
+                    seeds = ", ".join(str(h) if h is not None else "—" for h in hits)
+                    print(f"| {robot} | {method} | {bar:.2f} | {bound}{mean:.0f} | {seeds} | {ratio} |")
+
+
+if __name__ == "__main__":
+    main()
