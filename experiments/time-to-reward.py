@@ -1,8 +1,10 @@
 #!/usr/bin/env python3
 """Samples to a common bar: for each target robot, the first iteration at which each arm's episode
-reward (10-iteration moving average, the report's smoothing) reaches a share of what the
-from-scratch arm of its family ends at (L3P for l3p-transfer and its variants, MLP for
-mlp-transfer; final = mean of the last 5% of iterations, mean over seeds).
+reward reaches a share of what the from-scratch arm of its family ends at (L3P for l3p-transfer
+and its variants, MLP for mlp-transfer; final = mean of the last 5% of iterations, mean over
+seeds). The reward is smoothed over the last 10 iterations weighted by the episodes that ended in
+each, and a window counts only once 20 episodes have ended in it: early in a run few episodes end
+per iteration, and one lucky episode is not a level reached.
 
 The report's 85% / 95% convergence measures each curve against its own final value, so an arm
 that flattens early at a low reward "converges" fast. This asks the paper's question directly: how
@@ -10,6 +12,11 @@ many iterations does the transferred policy need to get where training from scra
 
     experiments/time-to-reward.py <experiment data dir> [share=1.0 ...]
     # e.g. experiments/time-to-reward.py l3p-data/experiments/laptop 0.5 0.8 1.0
+
+Resolution: an episode lasts 1,000 steps (20 s) and an iteration collects 24 steps per
+environment, so the first episodes that did not end in a fall end at iteration ~42 and earlier
+windows hold only falls. An arm that meets the bar at ~42 was there as soon as full episodes could
+show it: differences below ~42 iterations are not resolved.
 
 Output: a Markdown table per share; "—" = not reached within the arm's iterations (counted
 as the arm's length in the mean, so a mean with "—" is a lower bound, marked ≥).
@@ -24,24 +31,28 @@ import sys
 SMOOTH = 10
 
 
+MIN_EPISODES = 20
+
+
 def rewards(metrics):
+    """Per iteration: (mean episode reward or None, episodes that ended)."""
     rows = [json.loads(line) for line in open(metrics)]
     rows = [r for r in rows if r.get("source") == "learner"]
-    return [r["values"].get("episode_return") for r in rows]
+    return [(r["values"].get("episode_return"), r["values"].get("episodes", 0.0)) for r in rows]
 
 
 def moving_average(values):
-    out, window = [], []
-    for v in values:
-        if v is not None:
-            window.append(v)
-            window = window[-SMOOTH:]
-        out.append(sum(window) / len(window) if window else float("nan"))
+    out = []
+    for i in range(len(values)):
+        window = [(v, n) for v, n in values[max(0, i + 1 - SMOOTH):i + 1] if v is not None and n > 0]
+        episodes = sum(n for _, n in window)
+        out.append(sum(v * n for v, n in window) / episodes
+                   if episodes >= MIN_EPISODES else float("-inf"))
     return out
 
 
 def final(values):
-    v = [x for x in values if x is not None]
+    v = [x for x, _ in values if x is not None]
     n = max(1, round(len(v) * 0.05))
     return sum(v[-n:]) / n
 
