@@ -10,13 +10,16 @@ The report's 85% / 95% convergence measures each curve against its own final val
 that flattens early at a low reward "converges" fast. This asks the paper's question directly: how
 many iterations does the transferred policy need to get where training from scratch gets?
 
-    experiments/time-to-reward.py <experiment data dir> [share=1.0 ...]
+    experiments/time-to-reward.py [--pretrain] <experiment data dir> [share=1.0 ...]
     # e.g. experiments/time-to-reward.py l3p-data/experiments/laptop 0.5 0.8 1.0
 
 Resolution: an episode lasts 1,000 steps (20 s) and an iteration collects 24 steps per
 environment, so the first episodes that did not end in a fall end at iteration ~42 and earlier
 windows hold only falls. An arm that meets the bar at ~42 was there as soon as full episodes could
 show it: differences below ~42 iterations are not resolved.
+
+--pretrain compares the pretraining arms instead (the latent-size ablation: each `[[variants]]`
+arm against the plain `pretrain-l3p` arms).
 
 Output: a Markdown table per share; "—" = not reached within the arm's iterations (counted
 as the arm's length in the mean, so a mean with "—" is a lower bound, marked ≥).
@@ -65,17 +68,27 @@ def first_reaching(curve, bar):
 
 
 def main():
-    data = sys.argv[1]
-    shares = [float(s) for s in sys.argv[2:]] or [1.0]
+    args = sys.argv[1:]
+    pretrain = "--pretrain" in args
+    args = [a for a in args if a != "--pretrain"]
+    data = args[0]
+    shares = [float(s) for s in args[1:]] or [1.0]
     arms = {}
     for done in sorted(glob.glob(os.path.join(data, "*", "done.json"))):
         arm = os.path.basename(os.path.dirname(done))
-        if arm.startswith("pretrain-"):
+        if arm.startswith("pretrain-") != pretrain:
             continue
-        m = re.fullmatch(r"(.+?)-(mlp|l3p)(-transfer)?(?:-(\w+))?-s(\d+)", arm)
-        if not m:
-            continue
-        robot, family, transfer, variant, seed = m.groups()
+        if pretrain:
+            m = re.fullmatch(r"pretrain-(?:(\w+)-)?(mlp|l3p)-s(\d+)", arm)
+            if not m:
+                continue
+            variant, family, seed = m.groups()
+            robot, transfer = "pretraining", None
+        else:
+            m = re.fullmatch(r"(.+?)-(mlp|l3p)(-transfer)?(?:-(\w+))?-s(\d+)", arm)
+            if not m:
+                continue
+            robot, family, transfer, variant, seed = m.groups()
         method = family + (transfer or "") + (f" [{variant}]" if variant else "")
         values = rewards(os.path.join(data, arm, arm, "metrics.jsonl"))
         arms.setdefault((robot, family, method), []).append(values)
