@@ -123,12 +123,7 @@ pub async fn run_sim_robot(
         let publish_every = (200 / opts.state_hz) as u64;
         let mut pacer = Pacer::new(physics_dt);
         let start = Instant::now();
-        let mut tally = Tally::new(SimRobotSummary {
-            robot: robot.name.into(),
-            policy_min_base_height: f32::INFINITY,
-            nominal_base_height: nominal,
-            ..Default::default()
-        });
+        let mut tally = Tally::new(robot.name, nominal);
         let mut state = SimState::default();
         let mut applied_seq = None;
         let mut timed_out = false;
@@ -221,9 +216,16 @@ struct Tally {
 }
 
 impl Tally {
-    fn new(summary: SimRobotSummary) -> Self {
+    /// For `robot`, whose nominal standing height is `nominal_base_height`.
+    fn new(robot: &str, nominal_base_height: f32) -> Self {
         Tally {
-            summary,
+            summary: SimRobotSummary {
+                robot: robot.into(),
+                // Lowered by every policy step; `finish` makes it 0 if none came.
+                policy_min_base_height: f32::INFINITY,
+                nominal_base_height,
+                ..Default::default()
+            },
             policy_start: None,
             height_sum: 0.0,
         }
@@ -282,10 +284,7 @@ mod tests {
 
     #[test]
     fn the_tally_counts_modes_and_measures_only_the_policy_steps() {
-        let mut tally = Tally::new(SimRobotSummary {
-            policy_min_base_height: f32::INFINITY,
-            ..Default::default()
-        });
+        let mut tally = Tally::new("a1", 0.3);
         tally.step(ControlMode::ZeroTorque, &at(5.0, 0.1), 0.005);
         tally.step(ControlMode::Ramp, &at(5.0, 0.2), 0.005);
         // Two seconds of policy: 1 m forward, heights 0.30 and 0.26.
@@ -319,10 +318,7 @@ mod tests {
 
     #[test]
     fn without_policy_steps_the_minimum_height_is_zero_not_infinite() {
-        let mut tally = Tally::new(SimRobotSummary {
-            policy_min_base_height: f32::INFINITY,
-            ..Default::default()
-        });
+        let mut tally = Tally::new("a1", 0.3);
         tally.step(ControlMode::ZeroTorque, &at(0.0, 0.3), 0.005);
         let s = tally.finish(1.0);
         assert_eq!(s.policy_min_base_height, 0.0);

@@ -440,8 +440,7 @@ pub async fn run(
             _ = tick.tick() => out.announce(version).await?,
             event = events.recv() => match event {
                 None => break Err(DaemonError::Zenoh("subscriptions closed".into())),
-                Some(Event::Rejected) => rejected += 1,
-                Some(event) => route_event(&mut gather, event, version),
+                Some(event) => route_event(&mut gather, &mut rejected, event, version),
             },
         }
 
@@ -515,8 +514,8 @@ pub async fn run(
     })
 }
 
-/// A chunk or a liveliness change, handed to the gather rule.
-fn route_event(gather: &mut Gather, event: Event, version: u64) {
+/// A chunk or a liveliness change, handed to the gather rule; a rejected chunk is counted.
+fn route_event(gather: &mut Gather, rejected: &mut u64, event: Event, version: u64) {
     match event {
         Event::ActorUp(id) => {
             info!(actor = %id, "actor joined");
@@ -536,7 +535,7 @@ fn route_event(gather: &mut Gather, event: Event, version: u64) {
                 ChunkFate::Accepted => {}
             }
         }
-        Event::Rejected => {}
+        Event::Rejected => *rejected += 1,
     }
 }
 
