@@ -271,7 +271,18 @@ async fn live_daemons_survive_hostile_input_and_count_it() {
         }
     }
 
-    // 2. The controller: bad states and operator messages, none of which it may act on.
+    // 2. The controller: bad states and operator messages, none of which it may act on. Its port
+    // opens before it has fetched the policy and subscribed to states; states sent before then
+    // reach no one. It subscribes before it publishes its first status, so wait for that.
+    let deadline = tokio::time::Instant::now() + Duration::from_secs(60);
+    while statuses.lock().unwrap().is_empty() {
+        assert!(
+            tokio::time::Instant::now() < deadline,
+            "the controller never published a status{}",
+            log_tails(d)
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
     let states = session
         .declare_publisher(keys::robot_state("target"))
         .congestion_control(zenoh::qos::CongestionControl::Block)

@@ -386,9 +386,6 @@ fn line_chart(title: &str, y_label: &str, raw: &[(f64, f64)], smoothed: &[(f64, 
 }
 
 fn bands_chart(title: &str, y_label: &str, lines: &[(String, Vec<(f64, f64, f64, f64)>)]) -> Chart {
-    const COLOURS: [&str; 6] = [
-        "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
-    ];
     let frame = Frame::around(
         lines
             .iter()
@@ -396,7 +393,7 @@ fn bands_chart(title: &str, y_label: &str, lines: &[(String, Vec<(f64, f64, f64,
     );
     let mut layers = Vec::new();
     for (k, (label, points)) in lines.iter().enumerate() {
-        let colour = COLOURS[k % COLOURS.len()];
+        let colour = SERIES_COLOURS[k % SERIES_COLOURS.len()];
         let band = points
             .iter()
             .map(|&(x, _, _, hi)| (x, hi))
@@ -475,8 +472,11 @@ struct Radar<'a> {
     max: f64,
 }
 
-const RADAR_COLOURS: [&str; 6] = [
-    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b",
+/// One colour per series, for the curve charts and the radar alike: ten distinct ones, so an
+/// ablation's seven arms or a grid's four methods never repeat a colour.
+const SERIES_COLOURS: [&str; 10] = [
+    "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
+    "#bcbd22", "#17becf",
 ];
 const RADAR_SIZE: f64 = 520.0;
 
@@ -563,7 +563,7 @@ impl Radar<'_> {
             ));
         }
         for (k, (label, values)) in self.series.iter().enumerate() {
-            let colour = RADAR_COLOURS[k % RADAR_COLOURS.len()];
+            let colour = SERIES_COLOURS[k % SERIES_COLOURS.len()];
             svg.push_str(&format!(
                 "<polygon fill=\"{colour}\" fill-opacity=\"0.15\" stroke=\"{colour}\" stroke-width=\"2\" points=\"{}\"/>\n\
                  <text x=\"10\" y=\"{}\" fill=\"{colour}\">{}</text>\n",
@@ -600,7 +600,7 @@ impl Radar<'_> {
             c.text(lx, ly, axis, black, 1, anchor);
         }
         for (k, (label, values)) in self.series.iter().enumerate() {
-            let rgb = parse_hex(RADAR_COLOURS[k % RADAR_COLOURS.len()]);
+            let rgb = parse_hex(SERIES_COLOURS[k % SERIES_COLOURS.len()]);
             let mut polygon = self.polygon(values);
             c.fill_polygon(&polygon, rgb, 0.15);
             polygon.push(polygon[0]);
