@@ -581,6 +581,10 @@ pub struct ArmDone {
     /// that terrain alone with the curriculum running.
     #[serde(default)]
     pub by_terrain: BTreeMap<String, crate::eval_cmd::EvalRow>,
+    /// Transfer arms, per `evaluation.terrain_types` entry: the pretrained policy on the target
+    /// robot on that terrain alone before any fine-tuning — the skill fine-tuning kept or lost.
+    #[serde(default)]
+    pub zero_shot_by_terrain: BTreeMap<String, crate::eval_cmd::EvalRow>,
 }
 
 /// Where an arm stands, from its files.
@@ -672,6 +676,20 @@ pub struct ArmResult {
     pub terrain_levels: bool,
     /// Level reached per evaluated terrain type (`ArmDone::by_terrain`'s `final_terrain_level`).
     pub terrain_reach: BTreeMap<String, f64>,
+    /// Transfer arms: the pretrained policy's level per terrain type on this robot before
+    /// fine-tuning (`ArmDone::zero_shot_by_terrain`), with its pretraining arm's name and method
+    /// label (arms sharing a pretraining arm share these values).
+    pub zero_shot_reach: Option<ZeroShotReach>,
+}
+
+/// The pretrained policy's per-terrain levels on a target robot, before fine-tuning.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ZeroShotReach {
+    /// The pretraining arm, e.g. `pretrain-mlp-s1`.
+    pub source: String,
+    /// Its method label, e.g. `mlp` or `l3p [joint]`.
+    pub source_label: String,
+    pub levels: BTreeMap<String, f64>,
 }
 
 /// Mean and sample standard deviation (0 for one value); `None` when there are no values.
@@ -832,16 +850,49 @@ pub fn single_terrain_env(
     env
 }
 
-/// The simple→complex table: per (robot, method), the level reached on each terrain type (mean
-/// ± std over seeds); arms without terrain evaluations are left out.
-pub fn terrain_reach_table(results: &[ArmResult], types: &[TerrainType]) -> String {
-    let mut groups: BTreeMap<(String, String), Vec<&ArmResult>> = BTreeMap::new();
+/// The per-terrain levels to compare, grouped by `(robot, label)`: each target arm group's final
+/// policies (label: its method), and before fine-tuning each pretrained policy on that robot
+/// (label `zero-shot <pretraining method>`, one entry per pretraining arm — the arms that start
+/// from one pretraining arm share its zero-shot levels).
+pub fn terrain_reach_groups(
+    results: &[ArmResult],
+) -> BTreeMap<(String, String), Vec<&BTreeMap<String, f64>>> {
+    let mut groups: BTreeMap<(String, String), Vec<&BTreeMap<String, f64>>> = BTreeMap::new();
+    let mut sources_seen = std::collections::BTreeSet::new();
     for r in results.iter().filter(|r| !r.terrain_reach.is_empty()) {
         groups
             .entry((r.robot.clone(), r.method_label()))
             .or_default()
-            .push(r);
+            .push(&r.terrain_reach);
+        if let Some(z) = r.zero_shot_reach.as_ref().filter(|z| !z.levels.is_empty())
+            && sources_seen.insert((r.robot.clone(), z.source.clone()))
+        {
+            groups
+                .entry((r.robot.clone(), format!("zero-shot {}", z.source_label)))
+                .or_default()
+                .push(&z.levels);
+        }
     }
+    groups
+}
+
+/// Mean level per terrain type over a group's entries (NaN where none has the type).
+pub fn mean_reach(entries: &[&BTreeMap<String, f64>], types: &[TerrainType]) -> Vec<f64> {
+    types
+        .iter()
+        .map(|t| {
+            let v: Vec<f64> = entries
+                .iter()
+                .filter_map(|e| e.get(t.as_str()).copied())
+                .collect();
+            mean_std(&v).map_or(f64::NAN, |(m, _)| m)
+        })
+        .collect()
+}
+
+/// The simple→complex table: per (robot, method) the mean ± std over seeds of the level reached
+/// on each terrain type, and the pretrained policies' zero-shot levels beside them.
+pub fn terrain_reach_table(results: &[ArmResult], types: &[TerrainType]) -> String {
     let mut out = String::from("| robot | method | seeds |");
     for t in types {
         out.push_str(&format!(" {} |", t.as_str()));
@@ -849,12 +900,12 @@ pub fn terrain_reach_table(results: &[ArmResult], types: &[TerrainType]) -> Stri
     out.push_str("\n|---|---|---|");
     out.push_str(&"---|".repeat(types.len()));
     out.push('\n');
-    for ((robot, method), rs) in &groups {
-        out.push_str(&format!("| {robot} | {method} | {} |", rs.len()));
+    for ((robot, method), entries) in &terrain_reach_groups(results) {
+        out.push_str(&format!("| {robot} | {method} | {} |", entries.len()));
         for t in types {
-            let v: Vec<f64> = rs
+            let v: Vec<f64> = entries
                 .iter()
-                .filter_map(|r| r.terrain_reach.get(t.as_str()).copied())
+                .filter_map(|e| e.get(t.as_str()).copied())
                 .collect();
             out.push_str(&match mean_std(&v) {
                 Some((m, sd)) => format!(" {m:.2} ± {sd:.2} |"),

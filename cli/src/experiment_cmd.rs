@@ -1,9 +1,9 @@
-//! `l3p experiment plan|run|status|report <experiment.toml>`: the paper's transfer experiment as
-//! one command. `plan` writes every arm's config and prints it as the `l3p train` invocation it is
-//! (for a cluster scheduler); `run` trains the arms locally, `parallel` at a time, resumably
-//! (finished arms are skipped, an interrupted arm resumes from its checkpoint, a failed arm is
-//! reported and the others go on); `status` shows progress; `report` writes the table and curves.
-
+//! `l3p experiment plan|run|status|evaluate|report <experiment.toml>`: the paper's transfer
+//! experiment as one command. `plan` writes every arm's config and prints it as the `l3p train`
+//! invocation it is (for a cluster scheduler); `run` trains the arms locally, `parallel` at a time,
+//! resumably (finished arms are skipped, an interrupted arm resumes from its checkpoint, a failed
+//! arm is reported and the others go on); `status` shows progress; `evaluate` runs the
+//! evaluations finished arms lack; `report` writes the table and curves.
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -37,6 +37,10 @@ pub enum ExperimentCommand {
     /// Each arm's state: done (with wall-clock), running, partial (iteration reached, failure),
     /// pending.
     Status(SpecArg),
+    /// Run the evaluations finished arms lack, without training: after `[evaluation]
+    /// terrain_types` was added, or for arms finished by an older `l3p` (the per-terrain levels of
+    /// the final policy and of the pretrained policy zero-shot). Updates each arm's `done.json`.
+    Evaluate(SpecArg),
     /// The result table (Markdown, mean ± std over seeds, the paper's numbers beside ours) and
     /// per-robot learning curves (SVG, the methods overlaid) under `<data_dir>/<name>/report/`.
     Report(ReportArg),
@@ -62,6 +66,7 @@ pub fn run(args: ExperimentArgs) -> anyhow::Result<()> {
         ExperimentCommand::Plan(a) => plan_cmd(&a.spec),
         ExperimentCommand::Run(a) => run_cmd(&a.spec),
         ExperimentCommand::Status(a) => status_cmd(&a.spec),
+        ExperimentCommand::Evaluate(a) => evaluate_cmd(&a.spec),
         ExperimentCommand::Report(a) => report_cmd(&a.spec, a.window),
     }
 }
@@ -71,6 +76,29 @@ fn load(spec_path: &Path) -> anyhow::Result<(ExperimentSpec, Vec<Arm>)> {
     let base = Config::load(&spec.experiment.base_config)?;
     let arms = plan(&spec, &base)?;
     Ok((spec, arms))
+}
+
+fn evaluate_cmd(spec_path: &Path) -> anyhow::Result<()> {
+    let (spec, arms) = load(spec_path)?;
+    let (mut updated, mut finished) = (0, 0);
+    for arm in &arms {
+        let Some(mut done) = read_done(arm) else {
+            continue;
+        };
+        finished += 1;
+        let started = Instant::now();
+        if fill_terrain_evaluations(&spec, &arms, arm, &mut done)? {
+            write_done(arm, &done)?;
+            updated += 1;
+            println!(
+                "{}: evaluated in {:.0} s",
+                arm.name,
+                started.elapsed().as_secs_f64()
+            );
+        }
+    }
+    println!("{updated} of {finished} finished arms updated; the others had every evaluation");
+    Ok(())
 }
 
 /// Writes each arm's config file (unchanged files are left alone, so a running arm's config
@@ -383,43 +411,83 @@ fn finish_arm(
             evaluate(spec, &arm.config, &ckpt, robot, robot)?,
         );
     }
-    let zero_shot = match &arm.depends_on {
-        Some(dep) => {
-            let source = arms
-                .iter()
-                .find(|a| &a.name == dep)
-                .ok_or_else(|| anyhow::anyhow!("unknown pretraining arm {dep}"))?;
-            let source_robot = source
-                .robots
-                .first()
-                .ok_or_else(|| anyhow::anyhow!("pretraining arm {dep} has no robot"))?;
-            Some(evaluate(
-                spec,
-                &arm.config,
-                &crate::experiment::final_checkpoint(&source.run_dir()),
-                source_robot,
-                &arm.robots[0],
-            )?)
-        }
+    let zero_shot = match pretrained_source(arms, arm)? {
+        Some((source_ckpt, source_robot)) => Some(evaluate(
+            spec,
+            &arm.config,
+            &source_ckpt,
+            &source_robot,
+            &arm.robots[0],
+        )?),
         None => None,
     };
-    let by_terrain = match arm.stage {
-        Stage::Target => evaluate_terrains(spec, &arm.config, &ckpt, &arm.robots[0])?,
-        Stage::Pretrain => BTreeMap::new(),
-    };
-    let done = ArmDone {
+    let mut done = ArmDone {
         arm: arm.name.clone(),
         iterations: iteration,
         wall_seconds: wall,
         evaluations,
         zero_shot,
-        by_terrain,
+        by_terrain: BTreeMap::new(),
+        zero_shot_by_terrain: BTreeMap::new(),
     };
+    fill_terrain_evaluations(spec, arms, arm, &mut done)?;
+    write_done(arm, &done)
+}
+
+fn write_done(arm: &Arm, done: &ArmDone) -> anyhow::Result<()> {
     std::fs::write(
         arm.data_dir().join("done.json"),
-        serde_json::to_string_pretty(&done)?,
+        serde_json::to_string_pretty(done)?,
     )?;
     Ok(())
+}
+
+/// A transfer arm's pretraining arm: its final checkpoint and the robot whose adapters play it.
+fn pretrained_source(arms: &[Arm], arm: &Arm) -> anyhow::Result<Option<(PathBuf, String)>> {
+    let Some(dep) = &arm.depends_on else {
+        return Ok(None);
+    };
+    let source = arms
+        .iter()
+        .find(|a| &a.name == dep)
+        .ok_or_else(|| anyhow::anyhow!("unknown pretraining arm {dep}"))?;
+    let source_robot = source
+        .robots
+        .first()
+        .ok_or_else(|| anyhow::anyhow!("pretraining arm {dep} has no robot"))?;
+    Ok(Some((
+        crate::experiment::final_checkpoint(&source.run_dir()),
+        source_robot.clone(),
+    )))
+}
+
+/// Runs the per-terrain evaluations a target arm's `done` lacks: its final policy on each
+/// `evaluation.terrain_types` entry and, for a transfer arm, the pretrained policy zero-shot on
+/// each. Returns whether anything was added.
+fn fill_terrain_evaluations(
+    spec: &ExperimentSpec,
+    arms: &[Arm],
+    arm: &Arm,
+    done: &mut ArmDone,
+) -> anyhow::Result<bool> {
+    if arm.stage != Stage::Target || spec.evaluation.terrain_types.is_empty() {
+        return Ok(false);
+    }
+    let robot = &arm.robots[0];
+    let mut added = false;
+    if done.by_terrain.is_empty() {
+        let ckpt = crate::experiment::final_checkpoint(&arm.run_dir());
+        done.by_terrain = evaluate_terrains(spec, &arm.config, &ckpt, robot, robot)?;
+        added = true;
+    }
+    if done.zero_shot_by_terrain.is_empty()
+        && let Some((source_ckpt, source_robot)) = pretrained_source(arms, arm)?
+    {
+        done.zero_shot_by_terrain =
+            evaluate_terrains(spec, &arm.config, &source_ckpt, &source_robot, robot)?;
+        added = true;
+    }
+    Ok(added)
 }
 
 /// Plays `policy_robot`'s policy from `ckpt` on `robot`: the training command mix, then each
@@ -446,19 +514,17 @@ fn evaluate(
         .collect()
 }
 
-/// The final policy of a target arm on each `evaluation.terrain_types` entry alone, with the
-/// curriculum running for `terrain_rounds` episodes per environment.
+/// `policy_robot`'s policy from `ckpt` on `robot`, on each `evaluation.terrain_types` entry
+/// alone, with the curriculum running for `terrain_rounds` episodes per environment.
 fn evaluate_terrains(
     spec: &ExperimentSpec,
     config: &Config,
     ckpt: &Path,
+    policy_robot: &str,
     robot: &str,
 ) -> anyhow::Result<BTreeMap<String, crate::eval_cmd::EvalRow>> {
     let ev = &spec.evaluation;
-    if ev.terrain_types.is_empty() {
-        return Ok(BTreeMap::new());
-    }
-    let player = Player::load(spec, ckpt, robot, robot)?;
+    let player = Player::load(spec, ckpt, policy_robot, robot)?;
     ev.terrain_types
         .iter()
         .map(|&t| {
@@ -530,8 +596,15 @@ fn finished_arms(arms: &[Arm]) -> Vec<Finished<'_>> {
         .collect()
 }
 
+/// The level reached per terrain type (the last episode's, averaged over environments).
+fn final_levels(rows: &BTreeMap<String, crate::eval_cmd::EvalRow>) -> BTreeMap<String, f64> {
+    rows.iter()
+        .map(|(t, row)| (t.clone(), row.summary.final_terrain_level as f64))
+        .collect()
+}
+
 /// The results of every finished arm.
-fn collect_results(finished: &[Finished], window: usize) -> Vec<ArmResult> {
+fn collect_results(arms: &[Arm], finished: &[Finished], window: usize) -> Vec<ArmResult> {
     let mut out = Vec::new();
     for Finished { arm, done, records } in finished {
         let robot = arm.robots.join("+");
@@ -562,11 +635,19 @@ fn collect_results(finished: &[Finished], window: usize) -> Vec<ArmResult> {
                     TerrainPreset::Curriculum | TerrainPreset::Paper
                 ))
             },
-            terrain_reach: done
-                .by_terrain
-                .iter()
-                .map(|(t, row)| (t.clone(), row.summary.final_terrain_level as f64))
-                .collect(),
+            terrain_reach: final_levels(&done.by_terrain),
+            zero_shot_reach: arm
+                .depends_on
+                .as_ref()
+                .and_then(|dep| arms.iter().find(|a| &a.name == dep))
+                .map(|source| crate::experiment::ZeroShotReach {
+                    source: source.name.clone(),
+                    source_label: crate::experiment::method_label(
+                        source.method,
+                        source.variant.as_deref(),
+                    ),
+                    levels: final_levels(&done.zero_shot_by_terrain),
+                }),
             zero_shot_return: done.zero_shot.as_ref().and_then(|rows| {
                 rows.iter()
                     .find(|r| r.forward.is_none())
@@ -605,39 +686,18 @@ fn terrain_reach_section(
         crate::experiment::terrain_reach_table(results, types),
     );
     let axes: Vec<String> = types.iter().map(|t| t.as_str().replace('_', " ")).collect();
-    let mut robots: Vec<&str> = results
-        .iter()
-        .filter(|r| !r.terrain_reach.is_empty())
-        .map(|r| r.robot.as_str())
-        .collect();
-    robots.sort_unstable();
+    let groups = crate::experiment::terrain_reach_groups(results);
+    let mut robots: Vec<&str> = groups.keys().map(|(robot, _)| robot.as_str()).collect();
     robots.dedup();
     for robot in robots {
-        let mut labels: Vec<String> = results
+        let series: Vec<(String, Vec<f64>)> = groups
             .iter()
-            .filter(|r| r.robot == robot && !r.terrain_reach.is_empty())
-            .map(ArmResult::method_label)
-            .collect();
-        labels.sort();
-        labels.dedup();
-        let series: Vec<(String, Vec<f64>)> = labels
-            .into_iter()
-            .map(|label| {
-                let rs: Vec<&ArmResult> = results
-                    .iter()
-                    .filter(|r| r.robot == robot && r.method_label() == label)
-                    .collect();
-                let values = types
-                    .iter()
-                    .map(|t| {
-                        let v: Vec<f64> = rs
-                            .iter()
-                            .filter_map(|r| r.terrain_reach.get(t.as_str()).copied())
-                            .collect();
-                        crate::experiment::mean_std(&v).map_or(f64::NAN, |(m, _)| m)
-                    })
-                    .collect();
-                (format!("{label} ({} seeds)", rs.len()), values)
+            .filter(|((r, _), _)| r == robot)
+            .map(|((_, label), entries)| {
+                (
+                    format!("{label} ({} seeds)", entries.len()),
+                    crate::experiment::mean_reach(entries, types),
+                )
             })
             .collect();
         let title = format!("{robot} — terrain level reached");
@@ -669,7 +729,7 @@ fn mode_order(m: l3p_learner::Mode) -> u8 {
 fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
     let (spec, arms) = load(spec_path)?;
     let finished = finished_arms(&arms);
-    let results = collect_results(&finished, window);
+    let results = collect_results(&arms, &finished, window);
     if results.is_empty() {
         anyhow::bail!(
             "no arm of {} has finished yet\nhint: `l3p experiment status {}`",

@@ -213,11 +213,22 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
         assert!((0.0..=3.0).contains(&level), "{t}: {row}");
         assert_eq!(row["episodes"].as_u64().unwrap(), 4, "{t}: {row}");
     }
+    // Zero-shot per terrain: A1's pretrained policy on Spot on each type, before fine-tuning.
+    for t in ["flat", "pyramid_slope"] {
+        let row = &done["zero_shot_by_terrain"][t];
+        assert_eq!(row["episodes"].as_u64(), Some(4), "{t}: {row}");
+    }
     let pretrained: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(exp.join("pretrain-l3p-s1/done.json")).unwrap(),
     )
     .unwrap();
     assert!(pretrained["by_terrain"].as_object().unwrap().is_empty());
+    assert!(
+        pretrained["zero_shot_by_terrain"]
+            .as_object()
+            .unwrap()
+            .is_empty()
+    );
     let arm_config = std::fs::read_to_string(exp.join("arms/spot-l3p-transfer-s1.toml")).unwrap();
     assert!(
         arm_config.contains("mode = \"l3p-transfer\""),
@@ -243,6 +254,36 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
     assert!(!text(&out).contains("starting"), "{}", text(&out));
     assert_eq!(stamp("go1-l3p-s1"), before);
 
+    // `evaluate` fills in what an arm finished by an older l3p lacks (here: its zero-shot
+    // per-terrain levels), keeping the rest of its done.json; a second call has nothing to do.
+    let go1_done = exp.join("go1-l3p-transfer-s1/done.json");
+    let mut old: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&go1_done).unwrap()).unwrap();
+    let wall = old["wall_seconds"].clone();
+    old.as_object_mut().unwrap().remove("zero_shot_by_terrain");
+    std::fs::write(&go1_done, old.to_string()).unwrap();
+    let out = l3p(&["experiment", "evaluate", "micro.toml"], cwd);
+    assert!(out.status.success(), "{}", text(&out));
+    assert!(
+        text(&out).contains("1 of 6 finished arms updated"),
+        "{}",
+        text(&out)
+    );
+    let filled: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&go1_done).unwrap()).unwrap();
+    assert_eq!(filled["wall_seconds"], wall);
+    assert_eq!(
+        filled["zero_shot_by_terrain"].as_object().unwrap().len(),
+        2,
+        "{filled}"
+    );
+    let out = l3p(&["experiment", "evaluate", "micro.toml"], cwd);
+    assert!(
+        text(&out).contains("0 of 6 finished arms updated"),
+        "{}",
+        text(&out)
+    );
+
     // The report: one row per robot and method, curves per robot.
     let out = l3p(&["experiment", "report", "micro.toml"], cwd);
     let report = text(&out);
@@ -261,6 +302,7 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
     assert!(svg.contains("l3p-transfer [warm] (1 seeds)"), "{svg}");
     // The simple→complex section: a table row per target arm group and a radar per robot.
     assert!(report.contains("| flat | pyramid_slope |"), "{report}");
+    assert!(report.contains("| spot | zero-shot l3p | 1 |"), "{report}");
     let readme = std::fs::read_to_string(exp.join("report/README.md")).unwrap();
     assert!(readme.contains("## Simple → complex terrain"), "{readme}");
     let radar = std::fs::read_to_string(exp.join("report/spot-terrains.svg")).unwrap();

@@ -345,6 +345,7 @@ fn result(robot: &str, method: Mode, seed: u64, reward_85: Option<u64>, reward: 
         zero_shot_return: (method == Mode::L3pTransfer).then_some(1.5),
         terrain_levels: false,
         terrain_reach: BTreeMap::new(),
+        zero_shot_reach: None,
     }
 }
 
@@ -411,12 +412,28 @@ fn terrain_reach_is_tabled_per_type_and_evaluated_on_one_type_with_the_curriculu
     let mut b = result("go1", Mode::L3pTransfer, 2, Some(40), 20.0);
     b.terrain_reach = [("flat".to_string(), 8.0)].into();
     let plain = result("go1", Mode::Mlp, 1, Some(40), 20.0);
+    // Zero-shot: the pretrained policy before fine-tuning, once per pretraining arm (two arms
+    // from pretrain-l3p-s1 share it; seed 2 started from pretrain-l3p-s2).
+    let zero_shot = |source: &str, flat: f64| {
+        Some(ZeroShotReach {
+            source: source.into(),
+            source_label: "l3p".into(),
+            levels: [("flat".to_string(), flat)].into(),
+        })
+    };
+    a.zero_shot_reach = zero_shot("pretrain-l3p-s1", 3.0);
+    b.zero_shot_reach = zero_shot("pretrain-l3p-s2", 5.0);
+    let mut warm = result("go1", Mode::L3pTransfer, 1, Some(40), 20.0);
+    warm.variant = Some("warm".into());
+    warm.terrain_reach = [("flat".to_string(), 9.0)].into();
+    warm.zero_shot_reach = zero_shot("pretrain-l3p-s1", 3.0);
     let types = [
         TerrainType::Flat,
         TerrainType::Boxes,
         TerrainType::PyramidSlope,
     ];
-    let table = terrain_reach_table(&[a, b, plain], &types);
+    let results = [a, b, plain, warm];
+    let table = terrain_reach_table(&results, &types);
     assert!(table.starts_with("| robot | method | seeds | flat | boxes | pyramid_slope |"));
     // Mean ± sample std over the seeds that have the type; none: a dash. Arms without terrain
     // evaluations get no row.
@@ -425,6 +442,18 @@ fn terrain_reach_is_tabled_per_type_and_evaluated_on_one_type_with_the_curriculu
         "{table}"
     );
     assert!(!table.contains("| mlp |"), "{table}");
+    assert!(
+        table.contains("| go1 | zero-shot l3p | 2 | 4.00 ± 1.41 | — | — |"),
+        "{table}"
+    );
+    assert!(
+        table.contains("| go1 | l3p-transfer [warm] | 1 | 9.00 ± 0.00 |"),
+        "{table}"
+    );
+    let groups = terrain_reach_groups(&results);
+    let zs = &groups[&("go1".to_string(), "zero-shot l3p".to_string())];
+    assert_eq!(mean_reach(zs, &types)[0], 4.0);
+    assert!(mean_reach(zs, &types)[1].is_nan());
 
     let mut env = l3p_robots::config::EnvConfig::default();
     env.terrain.preset = TerrainPreset::SimpleRough;
