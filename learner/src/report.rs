@@ -478,15 +478,55 @@ const SERIES_COLOURS: [&str; 10] = [
     "#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f",
     "#bcbd22", "#17becf",
 ];
+/// The chart's height without its legend, and its least width.
 const RADAR_SIZE: f64 = 520.0;
+/// Legend line pitch (px).
+const RADAR_LEGEND_LINE: f64 = 15.0;
 
 impl Radar<'_> {
+    /// Wide enough for the longest axis label on either side of the circle.
+    fn width(&self) -> f64 {
+        let widest = self
+            .axes
+            .iter()
+            .map(|a| crate::raster::Canvas::text_width(a, 1))
+            .max()
+            .unwrap_or(0) as f64;
+        let radius = RADAR_SIZE / 2.0 - 90.0;
+        (2.0 * (radius * 1.12 + widest + 12.0)).max(RADAR_SIZE)
+    }
+
+    /// The chart, then one legend line per series below it.
+    fn height(&self) -> f64 {
+        RADAR_SIZE + RADAR_LEGEND_LINE * self.series.len() as f64
+    }
+
+    /// Baseline of series `k`'s legend line.
+    fn legend_y(&self, k: usize) -> f64 {
+        RADAR_SIZE - 5.0 + RADAR_LEGEND_LINE * k as f64
+    }
+
     fn centre(&self) -> (f64, f64, f64) {
         (
-            RADAR_SIZE / 2.0,
+            self.width() / 2.0,
             RADAR_SIZE / 2.0 + 20.0,
             RADAR_SIZE / 2.0 - 90.0,
         )
+    }
+
+    /// Where axis `k`'s label goes, and which of its ends is there (away from the circle).
+    fn label(&self, k: usize) -> (f64, f64, crate::raster::Anchor) {
+        use crate::raster::Anchor;
+        let (cx, _, _) = self.centre();
+        let (lx, ly) = self.at(k, self.max * 1.12);
+        let anchor = if (lx - cx).abs() < 5.0 {
+            Anchor::Middle
+        } else if lx > cx {
+            Anchor::Start
+        } else {
+            Anchor::End
+        };
+        (lx, ly, anchor)
     }
 
     /// Pixel position of value `v` on axis `k`.
@@ -523,11 +563,12 @@ impl Radar<'_> {
                 .join(" ")
         };
         let mut svg = format!(
-            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{RADAR_SIZE}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"12\">\n\
+            "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{}\" height=\"{}\" font-family=\"sans-serif\" font-size=\"12\">\n\
              <rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n\
              <text x=\"{}\" y=\"22\" text-anchor=\"middle\" font-size=\"15\">{}</text>\n",
-            RADAR_SIZE + 40.0,
-            RADAR_SIZE / 2.0,
+            self.width(),
+            self.height(),
+            self.width() / 2.0,
             escape(self.title)
         );
         let (cx, cy, _) = self.centre();
@@ -547,13 +588,11 @@ impl Radar<'_> {
         }
         for (k, axis) in self.axes.iter().enumerate() {
             let (x, y) = self.at(k, self.max);
-            let (lx, ly) = self.at(k, self.max * 1.12);
-            let anchor = if (lx - cx).abs() < 5.0 {
-                "middle"
-            } else if lx > cx {
-                "start"
-            } else {
-                "end"
+            let (lx, ly, anchor) = self.label(k);
+            let anchor = match anchor {
+                crate::raster::Anchor::Start => "start",
+                crate::raster::Anchor::Middle => "middle",
+                crate::raster::Anchor::End => "end",
             };
             svg.push_str(&format!(
                 "<line x1=\"{cx:.1}\" y1=\"{cy:.1}\" x2=\"{x:.1}\" y2=\"{y:.1}\" stroke=\"#cccccc\"/>\n\
@@ -568,7 +607,7 @@ impl Radar<'_> {
                 "<polygon fill=\"{colour}\" fill-opacity=\"0.15\" stroke=\"{colour}\" stroke-width=\"2\" points=\"{}\"/>\n\
                  <text x=\"10\" y=\"{}\" fill=\"{colour}\">{}</text>\n",
                 points(&self.polygon(values)),
-                RADAR_SIZE + 10.0 - 15.0 * (self.series.len() - 1 - k) as f64,
+                self.legend_y(k),
                 escape(label)
             ));
         }
@@ -578,7 +617,7 @@ impl Radar<'_> {
 
     fn png(&self) -> Vec<u8> {
         use crate::raster::{Anchor, Canvas, parse_hex};
-        let mut c = Canvas::new(RADAR_SIZE as usize, (RADAR_SIZE + 40.0) as usize);
+        let mut c = Canvas::new(self.width() as usize, self.height() as usize);
         let grey = [0xcc, 0xcc, 0xcc];
         let black = [0, 0, 0];
         let (cx, cy, _) = self.centre();
@@ -589,14 +628,7 @@ impl Radar<'_> {
         }
         for (k, axis) in self.axes.iter().enumerate() {
             c.line((cx, cy), self.at(k, self.max), grey, 1.0);
-            let (lx, ly) = self.at(k, self.max * 1.12);
-            let anchor = if (lx - cx).abs() < 5.0 {
-                Anchor::Middle
-            } else if lx > cx {
-                Anchor::Start
-            } else {
-                Anchor::End
-            };
+            let (lx, ly, anchor) = self.label(k);
             c.text(lx, ly, axis, black, 1, anchor);
         }
         for (k, (label, values)) in self.series.iter().enumerate() {
@@ -605,10 +637,16 @@ impl Radar<'_> {
             c.fill_polygon(&polygon, rgb, 0.15);
             polygon.push(polygon[0]);
             c.polyline(&polygon, rgb, 2.0);
-            let y = RADAR_SIZE + 6.0 - 15.0 * (self.series.len() - 1 - k) as f64;
-            c.text(10.0, y, label, rgb, 1, Anchor::Start);
+            c.text(10.0, self.legend_y(k) - 4.0, label, rgb, 1, Anchor::Start);
         }
-        c.text(RADAR_SIZE / 2.0, 16.0, self.title, black, 1, Anchor::Middle);
+        c.text(
+            self.width() / 2.0,
+            16.0,
+            self.title,
+            black,
+            1,
+            Anchor::Middle,
+        );
         c.to_png()
     }
 }
@@ -766,5 +804,40 @@ mod tests {
         let count = |rgb: [u8; 3]| buf.chunks(3).filter(|p| *p == rgb).count();
         assert!(count([0x1f, 0x77, 0xb4]) > 300, "first polygon's outline");
         assert!(count([0xff, 0x7f, 0x0e]) > 300, "second polygon's outline");
+
+        // Long axis labels (the terrain types) fit inside the image on both sides, and every
+        // legend line lies below the chart and inside the image.
+        let long: Vec<String> = [
+            "flat",
+            "random rough",
+            "pyramid slope",
+            "inverted pyramid slope",
+            "boxes",
+            "pyramid stairs",
+            "inverted pyramid stairs",
+        ]
+        .map(String::from)
+        .to_vec();
+        let five: Vec<(String, Vec<f64>)> =
+            (0..5).map(|k| (format!("m{k}"), vec![1.0; 7])).collect();
+        let wide = Radar {
+            title: "go1",
+            axes: &long,
+            series: &five,
+            max: 9.0,
+        };
+        for (k, axis) in long.iter().enumerate() {
+            let (x, _, anchor) = wide.label(k);
+            let w = crate::raster::Canvas::text_width(axis, 1) as f64;
+            let (x0, x1) = match anchor {
+                crate::raster::Anchor::Start => (x, x + w),
+                crate::raster::Anchor::Middle => (x - w / 2.0, x + w / 2.0),
+                crate::raster::Anchor::End => (x - w, x),
+            };
+            assert!(x0 >= 0.0 && x1 <= wide.width(), "{axis}: {x0}..{x1}");
+        }
+        let lowest_label = (0..long.len()).map(|k| wide.label(k).1).fold(0.0, f64::max);
+        assert!(wide.legend_y(0) - 12.0 > lowest_label);
+        assert!(wide.legend_y(4) < wide.height());
     }
 }
