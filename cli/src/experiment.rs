@@ -671,6 +671,8 @@ pub struct ArmResult {
     pub eval_yaw_rate_error: f64,
     pub eval_return: f64,
     pub zero_shot_return: Option<f64>,
+    /// `(iteration, reward)` for "when did it reach a bar" ([`l3p_learner::report::reward_for_bars`]).
+    pub reward_for_bars: Vec<(f64, f64)>,
     /// Whether the arm trained over a terrain curriculum (on flat ground the level is meaningless
     /// and its columns stay empty).
     pub terrain_levels: bool,
@@ -915,6 +917,102 @@ pub fn terrain_reach_table(results: &[ArmResult], types: &[TerrainType]) -> Stri
         out.push('\n');
     }
     out
+}
+
+/// The architecture a method belongs to: a transfer arm is measured against the from-scratch
+/// arms of its family.
+fn family(method: Mode) -> Mode {
+    match method {
+        Mode::Mlp | Mode::MlpTransfer => Mode::Mlp,
+        Mode::L3p | Mode::L3pTransfer => Mode::L3p,
+    }
+}
+
+/// Per robot and family: the iterations each arm group needs until its reward reaches `share` of
+/// the mean final reward of the robot's from-scratch arms of that family (main grid), mean over
+/// seeds (a seed that never gets there counts as its arm's length and marks the mean "≥"), and
+/// the speed-up against the from-scratch arms. Empty without from-scratch target arms.
+pub fn time_to_scratch_table(results: &[ArmResult], share: f64) -> String {
+    let mut rows = String::new();
+    let mut robots: Vec<&str> = results.iter().map(|r| r.robot.as_str()).collect();
+    robots.sort_unstable();
+    robots.dedup();
+    for robot in robots {
+        for fam in [Mode::L3p, Mode::Mlp] {
+            let scratch: Vec<&ArmResult> = results
+                .iter()
+                .filter(|r| r.robot == robot && r.method == fam && r.variant.is_none())
+                .collect();
+            let Some((scratch_final, _)) = mean_std(
+                &scratch
+                    .iter()
+                    .map(|r| r.row.final_reward)
+                    .collect::<Vec<_>>(),
+            ) else {
+                continue;
+            };
+            let bar = share * scratch_final;
+            let mut groups: BTreeMap<(bool, String), Vec<&ArmResult>> = BTreeMap::new();
+            for r in results
+                .iter()
+                .filter(|r| r.robot == robot && family(r.method) == fam)
+            {
+                let is_transfer = !(r.method == fam && r.variant.is_none());
+                groups
+                    .entry((is_transfer, r.method_label()))
+                    .or_default()
+                    .push(r);
+            }
+            let mut scratch_time: Option<(f64, bool)> = None;
+            for ((is_transfer, label), arms) in &groups {
+                let hits: Vec<Option<u64>> = arms
+                    .iter()
+                    .map(|r| {
+                        r.reward_for_bars
+                            .iter()
+                            .find(|p| p.1 >= bar)
+                            .map(|p| p.0 as u64)
+                    })
+                    .collect();
+                let counted: Vec<f64> = hits
+                    .iter()
+                    .zip(arms)
+                    .map(|(h, r)| h.unwrap_or(r.row.iterations) as f64)
+                    .collect();
+                let mean = counted.iter().sum::<f64>() / counted.len() as f64;
+                let missed = hits.iter().any(Option::is_none);
+                let per_seed = hits
+                    .iter()
+                    .map(|h| h.map_or("—".to_string(), |i| i.to_string()))
+                    .collect::<Vec<_>>()
+                    .join(", ");
+                let speedup = match (*is_transfer, scratch_time) {
+                    (false, _) => {
+                        scratch_time = Some((mean, missed));
+                        String::new()
+                    }
+                    (true, None) => String::new(),
+                    (true, Some((s, s_missed))) => match (missed, s_missed) {
+                        (false, false) => format!("{:.2}×", s / mean),
+                        (true, false) => format!("≤ {:.2}×", s / mean),
+                        (false, true) => format!("≥ {:.2}×", s / mean),
+                        (true, true) => "—".into(),
+                    },
+                };
+                rows.push_str(&format!(
+                    "| {robot} | {label} | {bar:.2} | {}{mean:.0} | {per_seed} | {speedup} |\n",
+                    if missed { "≥ " } else { "" },
+                ));
+            }
+        }
+    }
+    if rows.is_empty() {
+        return rows;
+    }
+    format!(
+        "| robot | method | bar (reward) | iterations, mean over seeds | per seed | vs scratch |\n\
+         |---|---|---|---|---|---|\n{rows}"
+    )
 }
 
 /// Per-iteration mean and min/max over seeds of `key` (smoothed per seed), for one curve band.

@@ -52,6 +52,39 @@ pub fn smooth(points: &[(f64, f64)], window: usize) -> Vec<(f64, f64)> {
     out
 }
 
+/// Episodes that must have ended inside a window of [`reward_for_bars`] before it counts: early in
+/// a run few episodes end per iteration, and one lucky episode is not a level reached.
+pub const BAR_MIN_EPISODES: f64 = 20.0;
+
+/// `(iteration, reward)`: the episode reward over the trailing `window` iterations, weighted by
+/// the episodes that ended in each; iterations whose window holds fewer than
+/// [`BAR_MIN_EPISODES`] ended episodes are left out. For "when did this arm reach a bar".
+pub fn reward_for_bars(records: &[MetricsRecord], window: usize) -> Vec<(f64, f64)> {
+    let window = window.max(1);
+    let per_iteration: Vec<(f64, f64, f64)> = records
+        .iter()
+        .map(|r| {
+            let episodes = r.values.get("episodes").copied().unwrap_or(0.0);
+            match r.values.get("episode_return") {
+                Some(&v) if v.is_finite() && episodes > 0.0 => (r.iteration as f64, v, episodes),
+                _ => (r.iteration as f64, 0.0, 0.0),
+            }
+        })
+        .collect();
+    let mut out = Vec::new();
+    for (i, &(iteration, _, _)) in per_iteration.iter().enumerate() {
+        let w = &per_iteration[(i + 1).saturating_sub(window)..=i];
+        let episodes: f64 = w.iter().map(|p| p.2).sum();
+        if episodes >= BAR_MIN_EPISODES {
+            out.push((
+                iteration,
+                w.iter().map(|p| p.1 * p.2).sum::<f64>() / episodes,
+            ));
+        }
+    }
+    out
+}
+
 fn mean_of(points: &[(f64, f64)]) -> f64 {
     points.iter().map(|p| p.1).sum::<f64>() / points.len().max(1) as f64
 }
@@ -762,6 +795,31 @@ mod tests {
             buf.chunks(3).any(|p| p[2] > p[0] && p[0] > 200),
             "a light blue band"
         );
+    }
+
+    #[test]
+    fn bar_rewards_weight_by_episodes_and_wait_for_enough_of_them() {
+        let record = |iteration: u64, reward: Option<f64>, episodes: f64| {
+            let mut r = MetricsRecord::new("run", "learner", iteration, 0);
+            if let Some(v) = reward {
+                r.values.insert("episode_return".into(), v);
+            }
+            r.values.insert("episodes".into(), episodes);
+            r
+        };
+        let records = [
+            record(1, Some(100.0), 1.0), // one lucky early episode: not enough to count
+            record(2, None, 0.0),
+            record(3, Some(10.0), 19.0), // 20 episodes in the window from here
+            record(4, Some(40.0), 20.0),
+        ];
+        let bars = reward_for_bars(&records, 3);
+        assert_eq!(bars.len(), 2, "{bars:?}");
+        assert_eq!(bars[0].0, 3.0);
+        assert!((bars[0].1 - (100.0 + 190.0) / 20.0).abs() < 1e-9);
+        // The window of 3 drops iteration 1: (19·10 + 20·40) / 39.
+        assert_eq!(bars[1].0, 4.0);
+        assert!((bars[1].1 - (190.0 + 800.0) / 39.0).abs() < 1e-9);
     }
 
     #[test]

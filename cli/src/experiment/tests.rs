@@ -343,6 +343,7 @@ fn result(robot: &str, method: Mode, seed: u64, reward_85: Option<u64>, reward: 
         eval_yaw_rate_error: 0.25,
         eval_return: reward,
         zero_shot_return: (method == Mode::L3pTransfer).then_some(1.5),
+        reward_for_bars: Vec::new(),
         terrain_levels: false,
         terrain_reach: BTreeMap::new(),
         zero_shot_reach: None,
@@ -470,4 +471,54 @@ fn terrain_reach_is_tabled_per_type_and_evaluated_on_one_type_with_the_curriculu
         single_terrain_env(&env, TerrainType::Flat).terrain.preset,
         TerrainPreset::Paper
     );
+}
+
+#[test]
+fn time_to_scratch_counts_iterations_to_the_scratch_final_and_marks_bounds() {
+    // A ramp to `top` reached at iteration `at`, flat afterwards, over 100 iterations.
+    let ramp = |at: f64, top: f64| -> Vec<(f64, f64)> {
+        (1..=100)
+            .map(|i| (i as f64, top * (i as f64 / at).min(1.0)))
+            .collect()
+    };
+    let arm = |method, variant: Option<&str>, seed, at, top| {
+        let mut r = result("go1", method, seed, Some(40), top);
+        r.variant = variant.map(String::from);
+        r.reward_for_bars = ramp(at, top);
+        r
+    };
+    let results = [
+        // From scratch: final reward 20 (both seeds), reached at 80 and 100.
+        arm(Mode::L3p, None, 1, 80.0, 20.0),
+        arm(Mode::L3p, None, 2, 100.0, 20.0),
+        // Transfer: 20 at 30 and 60 → 45 against 90: 2×.
+        arm(Mode::L3pTransfer, None, 1, 30.0, 20.0),
+        arm(Mode::L3pTransfer, None, 2, 60.0, 20.0),
+        // A variant that ends at 15 never reaches 20: counted as 100 → a bound.
+        arm(Mode::L3pTransfer, Some("warm"), 1, 10.0, 15.0),
+        // No `mlp` arm: the MLP family has no bar, `mlp-transfer` gets no row.
+        arm(Mode::MlpTransfer, None, 1, 10.0, 30.0),
+    ];
+    let table = time_to_scratch_table(&results, 1.0);
+    assert!(
+        table.contains("| go1 | l3p | 20.00 | 90 | 80, 100 |  |"),
+        "{table}"
+    );
+    assert!(
+        table.contains("| go1 | l3p-transfer | 20.00 | 45 | 30, 60 | 2.00× |"),
+        "{table}"
+    );
+    assert!(
+        table.contains("| go1 | l3p-transfer [warm] | 20.00 | ≥ 100 | — | ≤ 0.90× |"),
+        "{table}"
+    );
+    assert!(!table.contains("mlp-transfer"), "{table}");
+    // Half the bar: reached at half the ramp.
+    let half = time_to_scratch_table(&results, 0.5);
+    assert!(
+        half.contains("| go1 | l3p | 10.00 | 45 | 40, 50 |  |"),
+        "{half}"
+    );
+    // No from-scratch arm at all: nothing to measure against.
+    assert!(time_to_scratch_table(&results[2..], 1.0).is_empty());
 }
