@@ -77,7 +77,10 @@ pub fn run(args: ActorArgs) -> anyhow::Result<()> {
             .unwrap_or_else(|| format!("{}-{}", robot.name, std::process::id()));
         let seed =
             config.run.seed ^ (std::process::id() as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15);
-        let env = l3p_actor::sim_env(robot, &config.env, envs, threads, seed)?;
+        let mut env = l3p_actor::sim_env(robot, &config.env, envs, threads, seed)?;
+        if config.rollout.random_initial_episode_length {
+            env.env.stagger_time_outs();
+        }
         let opts = ActorOptions {
             run: config.run.name.clone(),
             robot: robot.name.to_string(),

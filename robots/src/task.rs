@@ -602,7 +602,7 @@ impl Task {
         {
             out.terminated = true;
             out.reason = DoneReason::TooLow;
-        } else if env.episode.steps >= self.spec.max_episode_steps {
+        } else if env.episode.steps + env.time_out_head_start >= self.spec.max_episode_steps {
             out.truncated = true;
             out.reason = DoneReason::TimeOut;
         }

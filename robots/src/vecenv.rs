@@ -12,8 +12,8 @@ use std::panic::AssertUnwindSafe;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use rand::SeedableRng;
 use rand::rngs::SmallRng;
+use rand::{Rng, SeedableRng};
 use rapier3d::math::{Pose, Rot3, Vec3};
 use rapier3d::parry::shape::HeightFieldFlags;
 use rayon::prelude::*;
@@ -503,6 +503,20 @@ impl VecEnv {
         });
         self.gather();
         &self.obs
+    }
+
+    /// Gives each env's current episode a random head start of `0..max_episode_steps` steps
+    /// towards its time-out (rsl_rl's `init_at_random_ep_len`): call once after
+    /// [`VecEnv::reset_all`]. Without it every env starts at step 0, so the episodes that do not
+    /// fall all time out together, in waves one episode length apart; later episodes are full
+    /// length either way.
+    pub fn stagger_time_outs(&mut self) {
+        let max = self.shared.task.spec.max_episode_steps.max(1);
+        for w in &mut self.workers {
+            for env in &mut w.envs {
+                env.time_out_head_start = w.rng.random_range(0..max);
+            }
+        }
     }
 
     /// `[num_envs * 12]` or an error naming the expected shape.

@@ -227,3 +227,62 @@ fn every_catalog_robot_stands_with_zero_actions_in_the_task() {
     }
     assert!(failures.is_empty(), "{failures:?}");
 }
+
+#[test]
+fn staggered_time_outs_spread_the_first_episode_ends_and_keep_later_episodes_full() {
+    let spec = RobotSpec::by_name("a1").unwrap();
+    // 1 s episodes (50 control steps): standing robots on flat ground end only by time-out.
+    let short = EnvConfig {
+        episode_length_s: 1.0,
+        ..cfg(TerrainPreset::Flat)
+    };
+    let first_ends = |stagger: bool| {
+        let mut env = VecEnv::new(spec, &short, 16, 2, 3).unwrap();
+        env.reset_all();
+        if stagger {
+            env.stagger_time_outs();
+        }
+        let actions = vec![0.0; 16 * 12];
+        let mut first: Vec<Option<usize>> = vec![None; 16];
+        let mut second_lengths = Vec::new();
+        for step in 1..=100 {
+            let out = env.step(&actions).unwrap();
+            assert!(out.terminated.iter().all(|t| !t), "a standing robot fell");
+            for (e, ended) in out.truncated.iter().enumerate() {
+                if *ended {
+                    match first[e] {
+                        None => first[e] = Some(step),
+                        Some(at) if second_lengths.len() < 16 => second_lengths.push(step - at),
+                        Some(_) => {}
+                    }
+                }
+            }
+        }
+        (
+            first.into_iter().map(Option::unwrap).collect::<Vec<_>>(),
+            second_lengths,
+        )
+    };
+    // Without: every env times out together after one episode length (~50 steps), then again.
+    let (plain, plain_second) = first_ends(false);
+    let length = plain[0];
+    assert!((50..=51).contains(&length), "{plain:?}");
+    assert!(plain.iter().all(|&s| s == length), "{plain:?}");
+    assert!(
+        plain_second.iter().all(|&l| l == length),
+        "{plain_second:?}"
+    );
+    // With: the first ends spread over the episode; every later episode is full length.
+    let (staggered, second) = first_ends(true);
+    assert!(
+        staggered.iter().all(|&s| (1..=length).contains(&s)),
+        "{staggered:?}"
+    );
+    let distinct: std::collections::BTreeSet<_> = staggered.iter().collect();
+    assert!(
+        distinct.len() >= 8,
+        "16 envs, few distinct ends: {staggered:?}"
+    );
+    assert_eq!(second.len(), 16, "{second:?}");
+    assert!(second.iter().all(|&l| l == length), "{second:?}");
+}

@@ -205,6 +205,12 @@ pub struct TaskEnvState {
     pub push_time_left: f32,
     /// Running episode sums.
     pub episode: EpisodeStats,
+    /// Control steps the episode counts as already elapsed towards its time-out: a random part
+    /// of the first episode when a run staggers time-outs ([`VecEnv::stagger_time_outs`], rsl_rl's
+    /// `init_at_random_ep_len`), else 0. The episode's statistics count only the steps taken.
+    ///
+    /// [`VecEnv::stagger_time_outs`]: crate::vecenv::VecEnv::stagger_time_outs
+    pub time_out_head_start: u32,
     /// Reason of the last `evaluate` that ended the episode.
     pub last_reason: DoneReason,
 }
