@@ -4,6 +4,7 @@
 //! resumably (finished arms are skipped, an interrupted arm resumes from its checkpoint, a failed
 //! arm is reported and the others go on); `status` shows progress; `evaluate` runs the
 //! evaluations finished arms lack; `report` writes the table and curves.
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -434,11 +435,13 @@ fn finish_arm(
     write_done(arm, &done)
 }
 
+/// Writes `done.json` through a temporary file and a rename, so an interrupted `evaluate` never
+/// leaves a finished arm with a torn file (which would make it look unfinished and train again).
 fn write_done(arm: &Arm, done: &ArmDone) -> anyhow::Result<()> {
-    std::fs::write(
-        arm.data_dir().join("done.json"),
-        serde_json::to_string_pretty(done)?,
-    )?;
+    let path = arm.data_dir().join("done.json");
+    let tmp = arm.data_dir().join("done.json.tmp");
+    std::fs::write(&tmp, serde_json::to_string_pretty(done)?)?;
+    std::fs::rename(&tmp, &path)?;
     Ok(())
 }
 
