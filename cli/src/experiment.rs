@@ -878,17 +878,19 @@ pub fn terrain_reach_groups(
     groups
 }
 
+/// The levels a group's entries reached on terrain type `t` (entries without it left out).
+fn levels_on(entries: &[&BTreeMap<String, f64>], t: TerrainType) -> Vec<f64> {
+    entries
+        .iter()
+        .filter_map(|e| e.get(t.as_str()).copied())
+        .collect()
+}
+
 /// Mean level per terrain type over a group's entries (NaN where none has the type).
 pub fn mean_reach(entries: &[&BTreeMap<String, f64>], types: &[TerrainType]) -> Vec<f64> {
     types
         .iter()
-        .map(|t| {
-            let v: Vec<f64> = entries
-                .iter()
-                .filter_map(|e| e.get(t.as_str()).copied())
-                .collect();
-            mean_std(&v).map_or(f64::NAN, |(m, _)| m)
-        })
+        .map(|&t| mean_std(&levels_on(entries, t)).map_or(f64::NAN, |(m, _)| m))
         .collect()
 }
 
@@ -904,12 +906,8 @@ pub fn terrain_reach_table(results: &[ArmResult], types: &[TerrainType]) -> Stri
     out.push('\n');
     for ((robot, method), entries) in &terrain_reach_groups(results) {
         out.push_str(&format!("| {robot} | {method} | {} |", entries.len()));
-        for t in types {
-            let v: Vec<f64> = entries
-                .iter()
-                .filter_map(|e| e.get(t.as_str()).copied())
-                .collect();
-            out.push_str(&match mean_std(&v) {
+        for &t in types {
+            out.push_str(&match mean_std(&levels_on(entries, t)) {
                 Some((m, sd)) => format!(" {m:.2} ± {sd:.2} |"),
                 None => " — |".into(),
             });
@@ -917,15 +915,6 @@ pub fn terrain_reach_table(results: &[ArmResult], types: &[TerrainType]) -> Stri
         out.push('\n');
     }
     out
-}
-
-/// The architecture a method belongs to: a transfer arm is measured against the from-scratch
-/// arms of its family.
-fn family(method: Mode) -> Mode {
-    match method {
-        Mode::Mlp | Mode::MlpTransfer => Mode::Mlp,
-        Mode::L3p | Mode::L3pTransfer => Mode::L3p,
-    }
 }
 
 /// Per robot and family: the iterations each arm group needs until its reward reaches `share` of
@@ -953,10 +942,9 @@ pub fn time_to_scratch_table(results: &[ArmResult], share: f64) -> String {
             };
             let bar = share * scratch_final;
             let mut groups: BTreeMap<(bool, String), Vec<&ArmResult>> = BTreeMap::new();
-            for r in results
-                .iter()
-                .filter(|r| r.robot == robot && family(r.method) == fam)
-            {
+            for r in results.iter().filter(|r| {
+                r.robot == robot && transfer_source(r.method).unwrap_or(r.method) == fam
+            }) {
                 let is_transfer = !(r.method == fam && r.variant.is_none());
                 groups
                     .entry((is_transfer, r.method_label()))
