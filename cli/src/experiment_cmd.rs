@@ -665,7 +665,8 @@ fn collect_results(arms: &[Arm], finished: &[Finished], window: usize) -> Vec<Ar
 /// Iterations each target arm needs to reach what its family's from-scratch arms end at (at 80%
 /// and 100% of it); empty when the experiment has no from-scratch target arms.
 fn time_to_scratch_section(results: &[ArmResult], window: usize) -> String {
-    let tables: Vec<String> = [0.8, 1.0]
+    const SHARES: [f64; 2] = [0.8, 1.0];
+    let tables: Vec<String> = SHARES
         .iter()
         .map(|&share| crate::experiment::time_to_scratch_table(results, share))
         .collect();
@@ -686,7 +687,7 @@ fn time_to_scratch_section(results: &[ArmResult], window: usize) -> String {
          episodes at 24 steps per iteration): smaller differences are not resolved.\n",
         l3p_learner::report::BAR_MIN_EPISODES
     );
-    for (share, table) in [0.8, 1.0].iter().zip(&tables) {
+    for (share, table) in SHARES.iter().zip(&tables) {
         md.push_str(&format!(
             "\n### {:.0}% of the from-scratch final reward\n\n{table}",
             share * 100.0

@@ -513,6 +513,8 @@ const SERIES_COLOURS: [&str; 10] = [
 ];
 /// The chart's height without its legend, and its least width.
 const RADAR_SIZE: f64 = 520.0;
+/// The outer ring's radius (px); axis labels sit just outside it.
+const RADAR_RADIUS: f64 = RADAR_SIZE / 2.0 - 90.0;
 /// Legend line pitch (px).
 const RADAR_LEGEND_LINE: f64 = 15.0;
 
@@ -525,8 +527,7 @@ impl Radar<'_> {
             .map(|a| crate::raster::Canvas::text_width(a, 1))
             .max()
             .unwrap_or(0) as f64;
-        let radius = RADAR_SIZE / 2.0 - 90.0;
-        (2.0 * (radius * 1.12 + widest + 12.0)).max(RADAR_SIZE)
+        (2.0 * (RADAR_RADIUS * 1.12 + widest + 12.0)).max(RADAR_SIZE)
     }
 
     /// The chart, then one legend line per series below it.
@@ -540,11 +541,7 @@ impl Radar<'_> {
     }
 
     fn centre(&self) -> (f64, f64, f64) {
-        (
-            self.width() / 2.0,
-            RADAR_SIZE / 2.0 + 20.0,
-            RADAR_SIZE / 2.0 - 90.0,
-        )
+        (self.width() / 2.0, RADAR_SIZE / 2.0 + 20.0, RADAR_RADIUS)
     }
 
     /// Where axis `k`'s label goes, and which of its ends is there (away from the circle).
