@@ -225,6 +225,20 @@ impl DeployPolicy {
         &self.std
     }
 
+    /// Each layer's config with its weight in the file layout (`[out, in]` row-major, transposed
+    /// back from the inference layout: exact) and its bias.
+    pub(crate) fn layer_tensors(&self) -> impl Iterator<Item = (&ExportLayer, Vec<f32>, &[f32])> {
+        self.config.layers.iter().zip(&self.layers).map(|(cfg, l)| {
+            let mut w = vec![0f32; l.input * l.output];
+            for i in 0..l.input {
+                for o in 0..l.output {
+                    w[o * l.input + i] = l.w[i * l.output + o];
+                }
+            }
+            (cfg, w, l.b.as_slice())
+        })
+    }
+
     /// Action means for `n = obs.len() / obs_dim` observations (row-major), written into `out`
     /// (`[n, action_dim]`, resized). Batches of 128 rows or more are split over the rayon pool in
     /// blocks of 64 rows (each block allocates its buffers); smaller ones run on this thread,

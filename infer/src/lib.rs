@@ -10,12 +10,15 @@
 //! - Exports ([`export`]): the `l3p-export-v1` format ([`ExportConfig`], [`ExportLayer`],
 //!   [`EXPORT_FORMAT`], [`replace_export_config`]) and [`DeployPolicy`] (`load`, `from_bytes`,
 //!   `act`, `act_into` with an [`InferScratch`], `sample`).
+//! - ONNX ([`onnx`]): [`DeployPolicy::to_onnx`] writes an export as an ONNX model (`Gemm` + `Elu`,
+//!   the JSON config in its metadata), protobuf written by hand.
 //! - [`PolicyError`]: every error of this crate and of `l3p-policy`.
 //!
 //! Architecture invariant: no burn, no rapier, no zenoh; depends on no other project crate.
 
 pub mod config;
 pub mod export;
+pub mod onnx;
 
 pub use config::{
     Arch, IO_VERSION, ObsSegment, PolicyConfig, PolicyRobot, RecoveryConfig, RobotIo, mlp_params,
@@ -24,6 +27,7 @@ pub use export::{
     DeployPolicy, EXPORT_FORMAT, ExportConfig, ExportLayer, InferScratch, read_export_json,
     replace_export_config,
 };
+pub use onnx::{ONNX_BATCH_DIM, ONNX_INPUT, ONNX_IR_VERSION, ONNX_OPSET, ONNX_OUTPUT};
 
 /// Errors of this crate and of `l3p-policy` (model, checkpoint and export I/O).
 #[derive(Debug, thiserror::Error)]
