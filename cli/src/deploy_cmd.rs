@@ -226,6 +226,8 @@ pub fn operate(args: OperateArgs) -> anyhow::Result<()> {
 pub enum ExportFormat {
     /// safetensors weights + JSON config (PyTorch / numpy loadable).
     Safetensors,
+    /// ONNX model (`obs` → `actions`, the action mean; onnxruntime, TensorRT) + JSON config.
+    Onnx,
 }
 
 #[derive(Debug, Args)]
@@ -235,7 +237,7 @@ pub struct ExportArgs {
     pub source: String,
     #[arg(long, value_enum, default_value = "safetensors")]
     pub format: ExportFormat,
-    /// Output directory: policy.safetensors + policy.json.
+    /// Output directory: policy.safetensors (or policy.onnx) + policy.json.
     #[arg(short, long)]
     pub output: PathBuf,
     /// Robot to export (needed when a checkpoint serves several robots).
@@ -249,7 +251,6 @@ pub struct ExportArgs {
 }
 
 pub fn export(args: ExportArgs) -> anyhow::Result<()> {
-    let ExportFormat::Safetensors = args.format;
     let (config, zenoh) = args.net.load()?;
     let path = Path::new(&args.source);
     let bytes = if path.exists() {
@@ -316,7 +317,13 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     };
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;
-    let st = args.output.join("policy.safetensors");
+    let (st, export) = match args.format {
+        ExportFormat::Safetensors => (args.output.join("policy.safetensors"), export),
+        ExportFormat::Onnx => (
+            args.output.join("policy.onnx"),
+            l3p_policy::DeployPolicy::from_bytes(&export)?.to_onnx()?,
+        ),
+    };
     let json = args.output.join("policy.json");
     std::fs::write(&st, &export).with_context(|| format!("writing {}", st.display()))?;
     std::fs::write(&json, serde_json::to_vec_pretty(&export_config)?)

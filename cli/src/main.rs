@@ -48,7 +48,7 @@ enum Command {
     SimRobot(l3p_cli::deploy_cmd::SimRobotArgs),
     /// Send an operator request to a running `l3p deploy`: resume, damp or stop.
     Operate(l3p_cli::deploy_cmd::OperateArgs),
-    /// Export a policy (checkpoint or deploy artifact) as safetensors + JSON for other runtimes.
+    /// Export a policy (checkpoint or deploy artifact) as safetensors or ONNX + JSON config.
     Export(l3p_cli::deploy_cmd::ExportArgs),
     /// Check a TOML config file: parse it strictly and print the resolved values.
     Config(l3p_cli::config_cmd::ConfigArgs),

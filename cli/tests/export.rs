@@ -104,3 +104,45 @@ fn export_then_numpy_gives_the_deploy_actions() {
         }
     }
 }
+
+/// `--format onnx` writes policy.onnx (the library's ONNX model of the same export, controller
+/// contract included; `infer/tests/onnx_runtime.rs` runs that in onnxruntime) beside the same
+/// policy.json; an unknown format is refused with the known ones.
+#[test]
+fn export_onnx_writes_the_model_of_the_same_export() {
+    let dir = tempfile::tempdir().unwrap();
+    let source = repo().join("docs/a1-flat-session1/policy");
+    let export = |format: &str, out_dir: &Path| {
+        Command::new(env!("CARGO_BIN_EXE_l3p"))
+            .args(["export", source.to_str().unwrap(), "--format", format, "-o"])
+            .arg(out_dir)
+            .output()
+            .unwrap()
+    };
+    let (st_dir, onnx_dir) = (dir.path().join("st"), dir.path().join("onnx"));
+    for (format, out_dir) in [("safetensors", &st_dir), ("onnx", &onnx_dir)] {
+        let out = export(format, out_dir);
+        assert!(
+            out.status.success(),
+            "{format}: {}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    assert!(!onnx_dir.join("policy.safetensors").exists());
+    let onnx = std::fs::read(onnx_dir.join("policy.onnx")).unwrap();
+    let policy = DeployPolicy::load(&st_dir).unwrap();
+    assert!(policy.config.io.is_some());
+    assert_eq!(onnx, policy.to_onnx().unwrap());
+    assert_eq!(
+        std::fs::read(onnx_dir.join("policy.json")).unwrap(),
+        std::fs::read(st_dir.join("policy.json")).unwrap()
+    );
+
+    let out = export("tflite", &dir.path().join("x"));
+    assert!(!out.status.success());
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("tflite") && stderr.contains("safetensors") && stderr.contains("onnx"),
+        "{stderr}"
+    );
+}
