@@ -360,6 +360,9 @@ pub struct WalkCriterion {
     pub max_non_foot_contact_share: f32,
     /// RMS joint-target change per step (rad).
     pub max_target_change_rms: f32,
+    /// Mean |heading change| per episode (degrees) under a zero yaw command with heading hold off:
+    /// a robot that tracks its speed in the base frame while it turns walks in circles.
+    pub max_heading_change_deg: f32,
 }
 
 impl Default for WalkCriterion {
@@ -372,6 +375,7 @@ impl Default for WalkCriterion {
             swing_share: [0.2, 0.6],
             max_non_foot_contact_share: 0.02,
             max_target_change_rms: 0.08,
+            max_heading_change_deg: 15.0,
         }
     }
 }
@@ -435,6 +439,13 @@ impl WalkCriterion {
             out.push(format!(
                 "joint-target change {:.3} rad RMS per step > {:.3}",
                 g.target_change_rms, self.max_target_change_rms
+            ));
+        }
+        let heading_deg = g.heading_drift_rad.to_degrees();
+        if !at_most(heading_deg, self.max_heading_change_deg) {
+            out.push(format!(
+                "heading changes {heading_deg:.0}° per episode (want <= {:.0}°)",
+                self.max_heading_change_deg
             ));
         }
         out
@@ -666,5 +677,13 @@ mod tests {
             ..t
         };
         assert_eq!(WalkCriterion::default().failures(&t_nan, &g).len(), 1);
+        // Tracking in the base frame while turning 30° per episode: walking in circles.
+        let turning = GaitReport {
+            heading_drift_rad: 30f32.to_radians(),
+            ..g
+        };
+        let fails = WalkCriterion::default().failures(&t, &turning);
+        assert_eq!(fails.len(), 1, "{fails:#?}");
+        assert!(fails[0].contains("heading changes 30°"), "{}", fails[0]);
     }
 }
