@@ -282,6 +282,9 @@ pub struct CommandConfig {
     pub heading_stiffness: f32,
     /// Fraction of resampled commands in heading mode. IsaacLab: 1.0.
     pub rel_heading_envs: f32,
+    /// Heading mode holds the heading the robot has when the command starts instead of drawing
+    /// one from `heading` (a heading hold, as a deploy controller's `--heading-hold`).
+    pub heading_hold: bool,
     /// Fraction of resampled commands that are all-zero (standing). IsaacLab: 0.02.
     pub rel_standing_envs: f32,
     /// Resampling period drawn uniformly from this range (s). IsaacLab: (10, 10).
@@ -298,6 +301,7 @@ impl Default for CommandConfig {
             heading_command: true,
             heading_stiffness: 0.5,
             rel_heading_envs: 1.0,
+            heading_hold: false,
             rel_standing_envs: 0.02,
             resampling_time_s: [10.0, 10.0],
         }
@@ -691,6 +695,11 @@ impl EnvConfig {
         let rp = &self.reward_params;
         check_pos("reward_params.tracking_std", rp.tracking_std)?;
         check_pos("reward_params.coarse_tracking_std", rp.coarse_tracking_std)?;
+        check_pos("reward_params.yaw_mean_std", rp.yaw_mean_std)?;
+        check_pos("reward_params.yaw_mean_window_s", rp.yaw_mean_window_s)?;
+        if let Some(std) = rp.yaw_tracking_std {
+            check_pos("reward_params.yaw_tracking_std", std)?;
+        }
         check_nonneg("reward_params.air_time_threshold", rp.air_time_threshold)?;
         check_nonneg(
             "reward_params.air_time_min_command",

@@ -77,8 +77,8 @@ pub use frames::{
     quat_rotate_inverse, wrap_to_pi, yaw_of,
 };
 pub use state::{
-    BodyRandomization, Command, DoneReason, EpisodeStats, EpisodeSummary, ResetSample, SimState,
-    StepResult, TaskEnvState,
+    BodyRandomization, Command, DoneReason, EpisodeStats, EpisodeSummary, MovingMean, ResetSample,
+    SimState, StepResult, TaskEnvState,
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -283,6 +283,14 @@ impl Task {
         cmd.time_left = uniform(rng, c.resampling_time_s);
     }
 
+    /// With `commands.heading_hold`, a fresh command in heading mode keeps the heading the robot
+    /// has now instead of its random draw (`l3p eval --heading-hold`: walk straight on, corrected).
+    fn hold_heading(&self, cmd: &mut Command, state: &SimState) {
+        if self.spec.commands.heading_hold && cmd.heading_mode {
+            cmd.heading = yaw_of(state.base_quat);
+        }
+    }
+
     /// Heading → yaw rate and standing → zero (IsaacLab `_update_command`).
     pub fn apply_command_modes(&self, cmd: &mut Command, state: &SimState) {
         let c = &self.spec.commands;
@@ -312,6 +320,7 @@ impl Task {
         env.command.time_left -= self.spec.step_dt;
         if env.command.time_left <= 0.0 {
             self.resample_command(&mut env.command, rng);
+            self.hold_heading(&mut env.command, state);
         }
         self.apply_command_modes(&mut env.command, state);
     }
@@ -329,6 +338,7 @@ impl Task {
         env.origin = origin;
         env.last_joint_vel = state.joint_vel;
         self.resample_command(&mut env.command, rng);
+        self.hold_heading(&mut env.command, state);
         self.apply_command_modes(&mut env.command, state);
         let rz = &self.spec.randomization;
         env.push_time_left = if rz.pushes {
@@ -491,9 +501,14 @@ impl Task {
         raw[RewardTerm::TrackLinVelXyExp as usize] = (-lin_err_sq * inv_var).exp();
         raw[RewardTerm::TrackLinVelXyCoarseExp as usize] =
             (-lin_err_sq / (p.coarse_tracking_std * p.coarse_tracking_std)).exp();
-        raw[RewardTerm::TrackAngVelZExp as usize] = (-ang_err * ang_err * inv_var).exp();
+        let yaw_std = p.yaw_tracking_std.unwrap_or(p.tracking_std);
+        raw[RewardTerm::TrackAngVelZExp as usize] =
+            (-ang_err * ang_err / (yaw_std * yaw_std)).exp();
         raw[RewardTerm::TrackAngVelZCoarseExp as usize] =
             (-ang_err * ang_err / (p.coarse_tracking_std * p.coarse_tracking_std)).exp();
+        let mean = env.yaw_error_window.push(ang_err, p.yaw_mean_window_s, dt);
+        raw[RewardTerm::TrackYawRateMeanExp as usize] =
+            (-mean * mean / (p.yaw_mean_std * p.yaw_mean_std)).exp();
         raw[RewardTerm::LinVelZL2 as usize] = v[2] * v[2];
         raw[RewardTerm::AngVelXyL2 as usize] = w[0] * w[0] + w[1] * w[1];
         let mut torque = 0.0;

@@ -65,9 +65,19 @@ macro_rules! reward_terms {
 pub struct RewardParams {
     /// Standard deviation of the tracking kernels, `exp(−err²/std²)`. IsaacLab: sqrt(0.25) = 0.5.
     pub tracking_std: f32,
+    /// Standard deviation of `track_ang_vel_z_exp`'s kernel (rad/s); `tracking_std` when unset.
+    /// A narrower yaw kernel pays for holding a zero yaw rate: at std 0.35 a 0.09 rad/s bias
+    /// (100° of heading in 20 s) costs 6% of the term, at 0.15 it costs 30%.
+    pub yaw_tracking_std: Option<f32>,
     /// Standard deviation of the wide kernels of `track_lin_vel_xy_coarse_exp` (m/s) and
     /// `track_ang_vel_z_coarse_exp` (rad/s).
     pub coarse_tracking_std: f32,
+    /// Standard deviation of `track_yaw_rate_mean_exp`'s kernel (rad/s): at 0.05 a drift of
+    /// 0.087 rad/s (100° in 20 s) pays e⁻³, one of 0.013 rad/s (15° in 20 s) 0.93.
+    pub yaw_mean_std: f32,
+    /// Window of `track_yaw_rate_mean_exp`'s moving mean (s): one stride of the 2 Hz trot clock
+    /// (at most 64 control steps).
+    pub yaw_mean_window_s: f32,
     /// Feet air-time threshold (s). IsaacLab: 0.5.
     pub air_time_threshold: f32,
     /// Air-time reward is zero when `‖cmd_xy‖ ≤` this (m/s). IsaacLab: 0.1.
@@ -89,7 +99,10 @@ impl Default for RewardParams {
     fn default() -> Self {
         RewardParams {
             tracking_std: 0.5,
+            yaw_tracking_std: None,
             coarse_tracking_std: 1.0,
+            yaw_mean_std: 0.05,
+            yaw_mean_window_s: 0.5,
             air_time_threshold: 0.5,
             air_time_min_command: 0.1,
             contact_threshold: 1.0,
@@ -136,6 +149,10 @@ reward_terms! {
     /// `track_lin_vel_xy_coarse_exp`. On rough ground the yaw error sits at 0.6–0.8 rad/s, where
     /// the sharp kernel (std 0.35) pays e⁻⁴ or less and teaches nothing.
     TrackAngVelZCoarseExp => track_ang_vel_z_coarse_exp = 0.0,
+    /// `exp(−ē²/yaw_mean_std²)` of the yaw-rate error ē averaged over the last
+    /// `yaw_mean_window_s` (one stride): the trot's yaw swing within a stride averages out and what is left is the drift that turns a robot under a zero yaw command —
+    /// which the per-step kernel hardly sees under the swing.
+    TrackYawRateMeanExp => track_yaw_rate_mean_exp = 0.0,
 }
 
 impl RewardScales {

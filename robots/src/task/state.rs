@@ -199,6 +199,8 @@ pub struct TaskEnvState {
     pub contact_time: [f32; NUM_FEET],
     /// Duration of the last completed air phase per foot (s).
     pub last_air_time: [f32; NUM_FEET],
+    /// The last stride's yaw-rate errors, for `track_yaw_rate_mean_exp`.
+    pub yaw_error_window: MovingMean,
     /// Env origin (tile origin) for the curriculum distance.
     pub origin: [f32; 3],
     /// Seconds until the next push (∞ when pushes are off).
@@ -266,4 +268,42 @@ pub struct BodyRandomization {
     pub kd_scale: f32,
     /// Action latency (s).
     pub latency_s: f32,
+}
+
+/// The longest [`MovingMean`] window, in control steps.
+pub const MOVING_MEAN_MAX_STEPS: usize = 64;
+
+/// The mean of the last `n` values pushed (fewer at the start): a window of exactly one stride
+/// removes the stride's periodic part and keeps the drift.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MovingMean {
+    values: [f32; MOVING_MEAN_MAX_STEPS],
+    pushed: usize,
+    sum: f32,
+}
+
+impl Default for MovingMean {
+    fn default() -> Self {
+        MovingMean {
+            values: [0.0; MOVING_MEAN_MAX_STEPS],
+            pushed: 0,
+            sum: 0.0,
+        }
+    }
+}
+
+impl MovingMean {
+    /// Adds `x` and returns the mean over the last `window_s` (at least one step, at most
+    /// [`MOVING_MEAN_MAX_STEPS`]) of steps of `dt`.
+    pub fn push(&mut self, x: f32, window_s: f32, dt: f32) -> f32 {
+        let n = ((window_s / dt).round() as usize).clamp(1, MOVING_MEAN_MAX_STEPS);
+        let slot = self.pushed % n;
+        if self.pushed >= n {
+            self.sum -= self.values[slot];
+        }
+        self.values[slot] = x;
+        self.sum += x;
+        self.pushed += 1;
+        self.sum / self.pushed.min(n) as f32
+    }
 }

@@ -108,6 +108,30 @@ fn heading_mode_yaw_rate() {
 }
 
 #[test]
+fn heading_hold_keeps_the_heading_at_the_commands_start() {
+    let mut cfg = EnvConfig {
+        recipe: crate::config::Recipe::Isaaclab,
+        ..EnvConfig::default()
+    };
+    cfg.terrain.preset = TerrainPreset::Flat;
+    cfg.commands.heading_hold = true;
+    cfg.commands.rel_standing_envs = 0.0;
+    let task = Task::new(cfg.resolve("a1").unwrap(), a1_params()).unwrap();
+    let mut rng = StdRng::seed_from_u64(3);
+    let mut env = TaskEnvState::new();
+    let yawed = |yaw| SimState {
+        base_quat: quat_from_yaw(yaw),
+        ..standing_state()
+    };
+    task.reset_env(&mut env, &yawed(0.7), [0.0; 3], &mut rng);
+    assert!((env.command.heading - 0.7).abs() < 1e-6);
+    assert!(env.command.wz.abs() < 1e-6, "{}", env.command.wz);
+    // drifted 0.2 rad left: turn back right at 0.5 · 0.2 rad/s
+    task.update_commands(&mut env, &yawed(0.9), &mut rng);
+    assert!((env.command.wz + 0.1).abs() < 1e-5, "{}", env.command.wz);
+}
+
+#[test]
 fn command_sampling_ranges_standing_share_and_resampling() {
     let (task, _) = flat_task("a1");
     let mut rng = StdRng::seed_from_u64(5);
@@ -175,6 +199,41 @@ fn perfect_tracking_reward() {
     let got = r.terms[RewardTerm::TrackLinVelXyExp as usize];
     assert!((got - 1.5 * dt * (-1.0f32).exp()).abs() < 1e-6, "{got}");
     assert!(!r.done());
+}
+
+#[test]
+fn yaw_rate_mean_term_sees_drift_not_the_stride_swing() {
+    let mut cfg = EnvConfig {
+        recipe: crate::config::Recipe::Isaaclab,
+        ..EnvConfig::default()
+    };
+    cfg.terrain.preset = TerrainPreset::Flat;
+    cfg.rewards.track_yaw_rate_mean_exp = Some(1.0);
+    let task = Task::new(cfg.resolve("a1").unwrap(), a1_params()).unwrap();
+    let terrain = Terrain::generate(&task.spec.terrain).unwrap();
+    let term = |yaw_rates: &mut dyn Iterator<Item = f32>| {
+        let mut env = TaskEnvState::new();
+        let mut st = standing_state();
+        task.reset_env(&mut env, &st, [0.0; 3], &mut StdRng::seed_from_u64(2));
+        let mut last = 0.0;
+        for wz in yaw_rates {
+            env.command = Command {
+                time_left: 10.0,
+                ..Default::default()
+            };
+            st.base_ang_vel_w = [0.0, 0.0, wz];
+            last = task.evaluate(&mut env, &st, &[0.0; 12], &terrain).terms
+                [RewardTerm::TrackYawRateMeanExp as usize]
+                / 0.02;
+        }
+        last
+    };
+    // a trot's ±0.3 rad/s yaw swing, flipping every 0.25 s, averages out
+    let swing = term(&mut (0..500).map(|i| if (i / 12) % 2 == 0 { 0.3 } else { -0.3 }));
+    assert!(swing > 0.6, "{swing}");
+    // a steady 0.1 rad/s drift (115° in 20 s): e^-(0.1/0.05)² = e^-4
+    let drift = term(&mut (0..500).map(|_| 0.1));
+    assert!((drift - (-4.0f32).exp()).abs() < 1e-3, "{drift}");
 }
 
 /// An A1 task on flat ground with IsaacLab's tables and `configure`'s changes, reset from the
