@@ -164,6 +164,7 @@ fn bench_train_in(a: &TrainBenchArgs, scratch: &std::path::Path) -> anyhow::Resu
         flags: crate::train_cmd::TrainingFlags {
             quiet: true,
             until_walks: false,
+            sim2sim: false,
             eval_every: 25,
             screen_every: 0,
             rerun: None,
@@ -316,6 +317,7 @@ fn deploy(a: DeployBenchArgs) -> anyhow::Result<()> {
             duration: Some(seconds),
             status_every: Duration::from_secs(1),
             insecure: None,
+            heading_hold: false,
         };
         let status = l3p_deploy::run_deploy(
             &deploy_session,

@@ -37,6 +37,11 @@ pub struct DeployArgs {
     /// command the robot. With it, every status carries a warning.
     #[arg(long)]
     pub insecure: bool,
+    /// A zero yaw-rate command holds the heading the robot has when it becomes zero (yaw rate =
+    /// clip(0.5 · heading error, ±1), the training task's heading mode, on the base's yaw); a
+    /// non-zero yaw rate passes through. Without it a zero yaw rate is passed to the policy as is.
+    #[arg(long)]
+    pub heading_hold: bool,
     #[command(flatten)]
     pub net: NetArgs,
 }
@@ -107,6 +112,7 @@ pub fn deploy(args: DeployArgs) -> anyhow::Result<()> {
             duration: seconds_arg("--duration", args.duration)?,
             status_every: Duration::from_secs(1),
             insecure,
+            heading_hold: args.heading_hold,
         };
         let status = l3p_deploy::run_deploy(&session, loaded, opts, cancel).await?;
         println!("{}", serde_json::to_string(&status)?);

@@ -45,6 +45,11 @@ pub struct EvalArgs {
     /// Print the results as JSON (one object: settings, and per speed tracking, gait, walk verdict).
     #[arg(long)]
     pub json: bool,
+    /// Hold the heading each command starts with: yaw rate = clip(0.5 · heading error, ±1), the
+    /// task's heading mode (deploy's `--heading-hold`). Off by default: the walk criterion's heading
+    /// bound asks for walking straight unaided.
+    #[arg(long)]
+    pub heading_hold: bool,
     #[command(flatten)]
     pub pins: PhysicsPins,
     /// Play the policy through this action filter instead of its own `io.action_filter_alpha`
@@ -186,6 +191,14 @@ pub fn constant_command(env: &mut l3p_robots::config::EnvConfig, vx: f32, vy: f3
     env.commands.rel_standing_envs = 0.0;
 }
 
+/// Every command in heading mode, holding the heading it starts with (yaw rate clipped at ±1).
+pub fn hold_heading(env: &mut l3p_robots::config::EnvConfig) {
+    env.commands.ang_vel_z = [-1.0, 1.0];
+    env.commands.heading_command = true;
+    env.commands.rel_heading_envs = 1.0;
+    env.commands.heading_hold = true;
+}
+
 /// Plays `policy` on `robot` with `env` and applies the walk criterion; the observation contract,
 /// action filter and (on the policy's own robot) PD gains are the policy's, the action filter
 /// unless `action_filter_alpha` overrides it.
@@ -252,6 +265,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         if let Some(v) = forward {
             constant_forward_command(&mut env, *v);
         }
+        if args.heading_hold {
+            hold_heading(&mut env);
+        }
         rows.push(evaluate_row(
             robot,
             &env,
@@ -268,6 +284,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             "policy": args.policy,
             "robot": robot.name,
             "terrain": args.terrain,
+            "heading_hold": args.heading_hold,
             "pins": {
                 "joint_damping": args.pins.joint_damping,
                 "joint_friction": args.pins.joint_friction,

@@ -18,6 +18,7 @@ use l3p_proto::{ControlMode, OperatorAction, RobotCommand, RobotState, WIRE_VERS
 use l3p_robots::task::{filtered_action, projected_gravity};
 use serde::{Deserialize, Serialize};
 
+use crate::heading::HeadingHold;
 use crate::io::ObservationBuilder;
 
 /// Safety settings (`[deploy]` in the config).
@@ -189,6 +190,8 @@ pub struct Controller {
     /// in training).
     policy_ticks: u64,
     last_target: Vec<f32>,
+    /// `Some`: a zero yaw-rate command holds the heading (`l3p deploy --heading-hold`).
+    heading_hold: Option<HeadingHold>,
     obs: Vec<f32>,
     action: Vec<f32>,
     damping_kd: Vec<f32>,
@@ -218,6 +221,7 @@ impl Controller {
             last_action: vec![0.0; n],
             policy_ticks: 0,
             last_target: io.default_joint_pos.clone(),
+            heading_hold: None,
             action: vec![0.0; n],
             damping_kd: io
                 .kd
@@ -228,6 +232,13 @@ impl Controller {
             io,
             seq: 0,
         })
+    }
+
+    /// A zero yaw-rate command holds the heading the robot has when it becomes zero
+    /// ([`HeadingHold`]), instead of asking the policy for a zero yaw rate.
+    pub fn with_heading_hold(mut self) -> Self {
+        self.heading_hold = Some(HeadingHold::default());
+        self
     }
 
     pub fn mode(&self) -> ControlMode {
@@ -353,6 +364,9 @@ impl Controller {
                     self.mode_since = Some(now);
                     self.last_action.iter_mut().for_each(|a| *a = 0.0);
                     self.policy_ticks = 0;
+                    if let Some(hold) = &mut self.heading_hold {
+                        hold.reset();
+                    }
                 }
             }
             ControlMode::Policy | ControlMode::Damping => {}
@@ -390,8 +404,13 @@ impl Controller {
                 let state = latest.map(|l| l.state);
                 match state {
                     Some(state) => {
-                        self.observations.build(
+                        let command = match &mut self.heading_hold {
+                            Some(hold) => hold.command(state.command, state.base_quat),
+                            None => state.command,
+                        };
+                        self.observations.build_with_command(
                             state,
+                            command,
                             &self.last_action,
                             self.policy_ticks,
                             &mut self.obs,

@@ -158,6 +158,18 @@ impl ObservationBuilder {
     /// previous action and, with a gait clock, its phase after `ticks` policy steps into `out`
     /// (`obs_dim` long).
     pub fn build(&self, state: &RobotState, last_action: &[f32], ticks: u64, out: &mut [f32]) {
+        self.build_with_command(state, state.command, last_action, ticks, out);
+    }
+
+    /// [`Self::build`] with `command` in place of the state's (a heading hold's output).
+    pub fn build_with_command(
+        &self,
+        state: &RobotState,
+        command: [f32; 3],
+        last_action: &[f32],
+        ticks: u64,
+        out: &mut [f32],
+    ) {
         let gravity = projected_gravity(state.base_quat);
         let clock =
             gait_clock_observation(gait_clock_phase(ticks, self.gait_clock_hz, self.control_dt));
@@ -168,7 +180,7 @@ impl ObservationBuilder {
                     Segment::LinVel => state.base_lin_vel[k],
                     Segment::AngVel => state.base_ang_vel[k],
                     Segment::Gravity => gravity[k],
-                    Segment::Command => state.command[k],
+                    Segment::Command => command[k],
                     Segment::JointPos => state.joint_pos[k] - self.default_joint_pos[k],
                     Segment::JointVel => state.joint_vel[k],
                     Segment::LastAction => last_action[k],

@@ -3,6 +3,7 @@
 //! Main types: [`artifact::LoadedPolicy`] (a deploy artifact checked against its robot:
 //! [`artifact::fetch_policy`], [`artifact::read_policy_file`]), [`controller::Controller`] (the
 //! safety state machine: zero-torque → ramp → policy, watchdog → latched damping),
+//! [`heading::HeadingHold`] (a zero yaw-rate command as a held heading),
 //! [`runtime::run_deploy`] (the deadline loop with Zenoh I/O), [`latest::LatestSlot`] (latest-value
 //! subscriber for robot state and commands), [`operate::operate`] (an operator's request to a
 //! running controller, resent until its status confirms it), [`io::ObservationBuilder`] (the
@@ -16,6 +17,7 @@
 
 pub mod artifact;
 pub mod controller;
+pub mod heading;
 pub mod io;
 pub mod latest;
 pub mod operate;

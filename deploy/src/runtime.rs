@@ -40,6 +40,8 @@ pub struct DeployOptions {
     /// Why the Zenoh links are not authenticated, when the operator accepted that (`l3p deploy
     /// --insecure`): logged as a warning and carried in every status.
     pub insecure: Option<String>,
+    /// A zero yaw-rate command holds the heading (`--heading-hold`, [`crate::heading::HeadingHold`]).
+    pub heading_hold: bool,
 }
 
 /// Timing samples kept for percentiles: 10 minutes at 50 Hz.
@@ -61,6 +63,11 @@ pub async fn run_deploy(
         loaded.action_scale,
         opts.safety.clone(),
     )?;
+    let controller = if opts.heading_hold {
+        controller.with_heading_hold()
+    } else {
+        controller
+    };
     let zerr = |e: zenoh::Error| DeployError::Zenoh(e.to_string());
 
     let believable_io = loaded.io.clone();

@@ -269,6 +269,47 @@ fn the_gait_clock_starts_at_phase_zero_when_the_policy_takes_over_and_advances_p
     assert!((policy.seen[25][1] - 1.0).abs() < 1e-4, "one period later");
 }
 
+/// A policy recording the velocity command it observes (entries 9..12 of the 48).
+struct CommandReader {
+    seen: Vec<[f32; 3]>,
+}
+
+impl PolicyFn for CommandReader {
+    fn act(&mut self, obs: &[f32], action: &mut [f32]) {
+        self.seen.push([obs[9], obs[10], obs[11]]);
+        action.iter_mut().for_each(|a| *a = 0.0);
+    }
+}
+
+#[test]
+fn heading_hold_turns_a_zero_yaw_command_into_the_way_back_to_the_held_heading() {
+    let io = a1_io();
+    let mut state = standing(&io);
+    let run = |hold: bool, state: &mut RobotState| {
+        let c = Controller::new("dog", io.clone(), 0.25, SafetyConfig::default()).unwrap();
+        let mut c = if hold { c.with_heading_hold() } else { c };
+        let mut policy = CommandReader { seen: Vec::new() };
+        let mut t = 0.0;
+        state.base_quat = quat_from_yaw_and_tilt(0.3, 0.0, 0.0);
+        while policy.seen.is_empty() {
+            t += DT;
+            tick_at(&mut c, t, state, t - 0.005, &mut policy);
+        }
+        // the base has yawed 0.2 rad left of where the policy took over
+        state.base_quat = quat_from_yaw_and_tilt(0.5, 0.0, 0.0);
+        t += DT;
+        tick_at(&mut c, t, state, t - 0.005, &mut policy);
+        policy.seen
+    };
+    let held = run(true, &mut state);
+    assert_eq!(held[0], [0.5, 0.0, 0.0]);
+    assert!((held[1][2] + 0.1).abs() < 1e-5, "{:?}", held[1]);
+    assert_eq!(held[1][0], 0.5);
+    // without the hold the policy sees the operator's command as sent
+    let plain = run(false, &mut state);
+    assert_eq!(plain[1], [0.5, 0.0, 0.0]);
+}
+
 #[test]
 fn startup_goes_zero_torque_then_ramp_then_policy() {
     let io = a1_io();
