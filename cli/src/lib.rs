@@ -20,5 +20,6 @@ pub mod report_cmd;
 pub mod robots_cmd;
 pub mod router_cmd;
 pub mod runtime;
+pub mod sim2sim_cmd;
 pub mod train_cmd;
 pub mod transfer_cmd;

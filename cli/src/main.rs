@@ -44,6 +44,9 @@ enum Command {
     Deploy(l3p_cli::deploy_cmd::DeployArgs),
     /// Run a Zenoh router (the library router `zenohd` runs) for processes on several machines.
     Router(l3p_cli::router_cmd::RouterArgs),
+    /// Play a policy in MuJoCo, a second simulator, through its export contract: gait diagnostics
+    /// and the walk verdict (needs Python 3 with numpy and mujoco).
+    Sim2sim(l3p_cli::sim2sim_cmd::Sim2SimArgs),
     /// Run the simulator as a stand-in robot on the deploy keys.
     SimRobot(l3p_cli::deploy_cmd::SimRobotArgs),
     /// Send an operator request to a running `l3p deploy`: resume, damp or stop.
@@ -86,6 +89,7 @@ fn run(command: Command) -> anyhow::Result<()> {
         Command::Actor(args) => l3p_cli::actor_cmd::run(args),
         Command::Metrics(args) => l3p_cli::metrics_cmd::run(args),
         Command::Eval(args) => l3p_cli::eval_cmd::run(args),
+        Command::Sim2sim(args) => l3p_cli::sim2sim_cmd::run(args),
         Command::Play(args) => l3p_cli::play_cmd::run(args),
         Command::Report(args) => l3p_cli::report_cmd::run(args),
         Command::Config(args) => l3p_cli::config_cmd::run(args),

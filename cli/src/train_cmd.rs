@@ -50,6 +50,11 @@ pub struct TrainingFlags {
     /// iterations, the evaluation).
     #[arg(long)]
     pub until_walks: bool,
+    /// With --until-walks: a check that passes is repeated in MuJoCo (`l3p sim2sim` on the
+    /// robot's own URDF, 3 × 20 s at 0.5 and 1.0 m/s, joint damping at the same pin) and the run
+    /// walks only when both simulators agree. Needs python3 with numpy and mujoco.
+    #[arg(long, requires = "until_walks")]
+    pub sim2sim: bool,
     /// Iterations between walk evaluations (with --until-walks).
     #[arg(long, default_value_t = 25)]
     pub eval_every: u64,
@@ -143,13 +148,61 @@ const SCREEN_XY_ERROR: f32 = 0.25;
 struct WalkCheck {
     iteration: u64,
     rows: Vec<crate::eval_cmd::EvalRow>,
+    /// With `--sim2sim`, once `rows` pass: the MuJoCo verdict's failing bounds (empty: it walks
+    /// there too) and the script's whole result.
+    sim2sim: Option<(Vec<String>, serde_json::Value)>,
+}
+
+impl WalkCheck {
+    /// Whether the criterion holds at both speeds (and in MuJoCo, when it was asked).
+    fn walks(&self) -> bool {
+        self.rows.len() == WALK_CHECK_SPEEDS.len()
+            && self.rows.iter().all(|r| r.walk_failures.is_empty())
+            && self.sim2sim.as_ref().is_none_or(|(f, _)| f.is_empty())
+    }
+}
+
+/// [`walk_check`], then, when it passes, the same check in MuJoCo (`--sim2sim`).
+fn walk_check_in_two_simulators(
+    config: &Config,
+    run_dir: &std::path::Path,
+) -> anyhow::Result<WalkCheck> {
+    // One snapshot of the checkpoint for both simulators (training goes on meanwhile).
+    let (iteration, robot, bytes) = latest_export(config, run_dir)?;
+    let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
+    let env = walk_env(config, robot)?;
+    let damping = env.randomization(robot.name).joint_damping[1];
+    let mut check = check_policy(iteration, robot, &policy, env)?;
+    if !check.walks() {
+        return Ok(check);
+    }
+    let dir = tempfile::Builder::new()
+        .prefix("l3p-walk-sim2sim")
+        .tempdir()?;
+    std::fs::write(dir.path().join("policy.safetensors"), bytes)?;
+    let args = crate::sim2sim_cmd::Sim2SimArgs::walk_check(dir.path(), damping);
+    let run = crate::sim2sim_cmd::run_sim2sim(&args)?
+        .pop()
+        .ok_or_else(|| anyhow::anyhow!("sim2sim ran no variant"))?;
+    check.sim2sim = Some((run.failures(), run.json));
+    Ok(check)
 }
 
 /// Evaluates `<run_dir>/checkpoints/latest.ckpt` on the first actor's robot against the walk
 /// criterion: forward 0.5 and 1.0 m/s, joint damping pinned at the top of the training range,
 /// pushes off, the rest of the training randomisation on, physics at [`WALK_CHECK_PHYSICS_DT`].
 fn walk_check(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<WalkCheck> {
-    let (iteration, robot, policy, mut env) = walk_setup(config, run_dir)?;
+    let (iteration, robot, policy, env) = walk_setup(config, run_dir)?;
+    check_policy(iteration, robot, &policy, env)
+}
+
+/// The walk criterion's rows for `policy` (the harder speed first; the other only if it passes).
+fn check_policy(
+    iteration: u64,
+    robot: &'static l3p_robots::catalog::RobotSpec,
+    policy: &l3p_policy::DeployPolicy,
+    mut env: l3p_robots::config::EnvConfig,
+) -> anyhow::Result<WalkCheck> {
     env.set_physics_dt(WALK_CHECK_PHYSICS_DT)?;
     let mut rows = Vec::new();
     // The harder speed first: while it fails (most checks) the other is not run, which halves a
@@ -166,7 +219,7 @@ fn walk_check(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<Walk
         rows.push(crate::eval_cmd::evaluate_row(
             robot,
             &e,
-            &policy,
+            policy,
             WALK_CHECK_ENVS,
             WALK_CHECK_ENVS,
             WALK_CHECK_SEED,
@@ -175,7 +228,11 @@ fn walk_check(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<Walk
         )?);
     }
     rows.reverse();
-    Ok(WalkCheck { iteration, rows })
+    Ok(WalkCheck {
+        iteration,
+        rows,
+        sim2sim: None,
+    })
 }
 
 /// The latest checkpoint's iteration and deployable policy, its robot (the first actor's) and the
@@ -191,6 +248,15 @@ fn walk_setup(
     l3p_robots::config::EnvConfig,
 )> {
     let (iteration, robot, policy) = latest_policy(config, run_dir)?;
+    Ok((iteration, robot, policy, walk_env(config, robot)?))
+}
+
+/// The walk criterion's environment for `robot`: joint damping pinned at the top of the training
+/// range, pushes off, the rest of the training randomisation on.
+fn walk_env(
+    config: &Config,
+    robot: &l3p_robots::catalog::RobotSpec,
+) -> anyhow::Result<l3p_robots::config::EnvConfig> {
     let mut env = config.env.clone();
     let top_damping = env.randomization(robot.name).joint_damping[1];
     crate::eval_cmd::PhysicsPins {
@@ -198,7 +264,7 @@ fn walk_setup(
         ..Default::default()
     }
     .apply(&mut env)?;
-    Ok((iteration, robot, policy, env))
+    Ok(env)
 }
 
 /// The latest checkpoint's iteration, its first actor's robot and its deployable policy for it.
@@ -210,6 +276,19 @@ fn latest_policy(
     &'static l3p_robots::catalog::RobotSpec,
     l3p_policy::DeployPolicy,
 )> {
+    let (iteration, robot, bytes) = latest_export(config, run_dir)?;
+    Ok((
+        iteration,
+        robot,
+        l3p_policy::DeployPolicy::from_bytes(&bytes)?,
+    ))
+}
+
+/// The latest checkpoint's iteration, its first actor's robot and its export's bytes for it.
+fn latest_export(
+    config: &Config,
+    run_dir: &std::path::Path,
+) -> anyhow::Result<(u64, &'static l3p_robots::catalog::RobotSpec, Vec<u8>)> {
     let ckpt =
         l3p_policy::load_checkpoint(&daemon::checkpoint_path(run_dir), &l3p_policy::cpu_device())?;
     let robot_name = config
@@ -219,11 +298,7 @@ fn latest_policy(
         .ok_or_else(|| anyhow::anyhow!("no [[actors]] in the config"))?;
     let robot = l3p_robots::catalog::RobotSpec::by_name(&robot_name)?;
     let (bytes, _) = l3p_policy::export_bytes(&ckpt.model, robot.name)?;
-    Ok((
-        ckpt.iteration,
-        robot,
-        l3p_policy::DeployPolicy::from_bytes(&bytes)?,
-    ))
+    Ok((ckpt.iteration, robot, bytes))
 }
 
 /// Logs a rollout of the latest checkpoint into the `--rerun` stream.
@@ -318,6 +393,12 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     // Walk checks and --rerun rollouts play the latest checkpoint: write one at least as often as
     // they come, or they replay an old policy.
     let mut every = u64::MAX;
+    if args.flags.sim2sim {
+        // Found out now, not after the first passing check an hour in.
+        crate::sim2sim_cmd::check_python(
+            &crate::sim2sim_cmd::Sim2SimArgs::walk_check(std::path::Path::new("."), 0.0).python,
+        )?;
+    }
     if args.flags.until_walks {
         every = every.min(args.flags.eval_every.max(1));
         if args.flags.screen_every > 0 {
@@ -469,7 +550,8 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
                         {
                             last_walk_eval = r.iteration;
                             last_screen = r.iteration;
-                            walk_task = Some(spawn_walk(&config, &run_dir, walk_check));
+                            let check = if args.flags.sim2sim { walk_check_in_two_simulators } else { walk_check };
+                            walk_task = Some(spawn_walk(&config, &run_dir, check));
                         } else if args.flags.until_walks
                             && args.flags.screen_every > 0
                             && !checking
@@ -558,16 +640,23 @@ fn record_walk_check(check: &WalkCheck, wall_seconds: f64, run_dir: &std::path::
             info!("  vx {:.1}: {f}", r.forward.unwrap_or(f32::NAN));
         }
     }
+    if let Some((failures, _)) = &check.sim2sim {
+        info!(failing_bounds = failures.len(), "the same check in MuJoCo");
+        for f in failures {
+            info!("  MuJoCo: {f}");
+        }
+    }
     let line = serde_json::json!({
         "iteration": check.iteration,
         "wall_seconds": wall_seconds,
         "physics_dt_ms": (WALK_CHECK_PHYSICS_DT * 1000.0).round(),
         "rows": check.rows,
+        "sim2sim": check.sim2sim.as_ref().map(|(_, json)| json),
     });
     if let Err(e) = append_line(&run_dir.join("walk_checks.jsonl"), &line.to_string()) {
         warn!("cannot record the walk check: {e}");
     }
-    fails == 0 && check.rows.len() == WALK_CHECK_SPEEDS.len()
+    check.walks()
 }
 
 /// A walk check or screen of the latest checkpoint on a blocking thread.
@@ -652,6 +741,7 @@ fn report_walk(
                 "samples": check.iteration * samples_per_iteration,
                 "physics_dt_ms": (WALK_CHECK_PHYSICS_DT * 1000.0).round(),
                 "rows": check.rows,
+                "sim2sim": check.sim2sim.as_ref().map(|(_, json)| json),
             })
         }
         None => {
