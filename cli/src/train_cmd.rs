@@ -147,6 +147,9 @@ const SCREEN_XY_ERROR: f32 = 0.25;
 /// One walk evaluation of a checkpoint during `--until-walks`.
 struct WalkCheck {
     iteration: u64,
+    /// The export that was checked (safetensors bytes): the policy `walk.json` speaks of, kept as
+    /// `<run_dir>/walked/` — training goes on for a few iterations after a check starts.
+    export: Vec<u8>,
     rows: Vec<crate::eval_cmd::EvalRow>,
     /// With `--sim2sim`, once `rows` pass: the MuJoCo verdict's failing bounds (empty: it walks
     /// there too) and the script's whole result.
@@ -172,14 +175,14 @@ fn walk_check_in_two_simulators(
     let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
     let env = walk_env(config, robot)?;
     let damping = env.randomization(robot.name).joint_damping[1];
-    let mut check = check_policy(iteration, robot, &policy, env)?;
+    let mut check = check_policy(iteration, bytes, robot, &policy, env)?;
     if !check.walks() {
         return Ok(check);
     }
     let dir = tempfile::Builder::new()
         .prefix("l3p-walk-sim2sim")
         .tempdir()?;
-    std::fs::write(dir.path().join("policy.safetensors"), bytes)?;
+    std::fs::write(dir.path().join("policy.safetensors"), &check.export)?;
     let args = crate::sim2sim_cmd::Sim2SimArgs::walk_check(dir.path(), damping);
     let run = crate::sim2sim_cmd::run_sim2sim(&args)?
         .pop()
@@ -192,13 +195,15 @@ fn walk_check_in_two_simulators(
 /// criterion: forward 0.5 and 1.0 m/s, joint damping pinned at the top of the training range,
 /// pushes off, the rest of the training randomisation on, physics at [`WALK_CHECK_PHYSICS_DT`].
 fn walk_check(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<WalkCheck> {
-    let (iteration, robot, policy, env) = walk_setup(config, run_dir)?;
-    check_policy(iteration, robot, &policy, env)
+    let (iteration, robot, export) = latest_export(config, run_dir)?;
+    let policy = l3p_policy::DeployPolicy::from_bytes(&export)?;
+    check_policy(iteration, export, robot, &policy, walk_env(config, robot)?)
 }
 
 /// The walk criterion's rows for `policy` (the harder speed first; the other only if it passes).
 fn check_policy(
     iteration: u64,
+    export: Vec<u8>,
     robot: &'static l3p_robots::catalog::RobotSpec,
     policy: &l3p_policy::DeployPolicy,
     mut env: l3p_robots::config::EnvConfig,
@@ -230,6 +235,7 @@ fn check_policy(
     rows.reverse();
     Ok(WalkCheck {
         iteration,
+        export,
         rows,
         sim2sim: None,
     })
@@ -727,11 +733,21 @@ fn report_walk(
 ) -> anyhow::Result<()> {
     let json = match walked {
         Some((check, seconds)) => {
+            let walked = run_dir.join("walked");
+            std::fs::create_dir_all(&walked)?;
+            std::fs::write(walked.join("policy.safetensors"), &check.export)?;
+            let config = l3p_policy::DeployPolicy::from_bytes(&check.export)?.config;
+            std::fs::write(
+                walked.join("policy.json"),
+                serde_json::to_string_pretty(&config)?,
+            )?;
             println!(
-                "walks: iteration {} after {:.0} s wall-clock, {} samples",
+                "walks: iteration {} after {:.0} s wall-clock, {} samples; the policy checked is \
+                 in {}",
                 check.iteration,
                 seconds,
-                check.iteration * samples_per_iteration
+                check.iteration * samples_per_iteration,
+                walked.display()
             );
             print!("{}", crate::eval_cmd::format_rows(&check.rows));
             serde_json::json!({

@@ -272,6 +272,8 @@ envs = 4
         serde_json::from_str(&std::fs::read_to_string(data.join("walks/walk.json")).unwrap())
             .unwrap();
     assert_eq!(walk["walks"], false);
+    // Only a run that walked keeps the policy its passing check played (`walked/`).
+    assert!(!data.join("walks/walked").exists());
     let checks = std::fs::read_to_string(data.join("walks/walk_checks.jsonl")).unwrap();
     let checks: Vec<serde_json::Value> = checks
         .lines()
