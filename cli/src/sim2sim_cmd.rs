@@ -416,4 +416,26 @@ mod tests {
         );
         assert_eq!(v[1].script_args(), ["--no-passive"]);
     }
+
+    fn run_with(json: serde_json::Value) -> Sim2SimRun {
+        Sim2SimRun {
+            variant: Variant::standard().remove(0),
+            table: String::new(),
+            json,
+        }
+    }
+
+    #[test]
+    fn the_verdict_decides_and_a_missing_one_fails() {
+        let pass = run_with(serde_json::json!({"verdict": {"pass": true, "failures": []}}));
+        assert!(pass.passed() && pass.failures().is_empty());
+        let fail = run_with(serde_json::json!({"verdict": {
+            "pass": false,
+            "failures": ["1.00 m/s: heading change 43 > 15 deg"]
+        }}));
+        assert!(!fail.passed());
+        assert_eq!(fail.failures(), ["1.00 m/s: heading change 43 > 15 deg"]);
+        let garbled = run_with(serde_json::json!({"commands": []}));
+        assert_eq!(garbled.failures(), ["sim2sim gave no verdict"]);
+    }
 }
