@@ -265,7 +265,7 @@ mod tests {
 
     const EXPORT_DIR: &str = concat!(
         env!("CARGO_MANIFEST_DIR"),
-        "/../docs/a1-flat-session13/policy"
+        "/../docs/a1-flat-session27/policy"
     );
 
     fn policy() -> DeployPolicy {

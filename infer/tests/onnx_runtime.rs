@@ -14,7 +14,7 @@ fn repo() -> &'static Path {
 
 #[test]
 fn onnxruntime_runs_the_export_like_numpy() {
-    let source = repo().join("docs/a1-flat-session13/policy");
+    let source = repo().join("docs/a1-flat-session27/policy");
     let policy = DeployPolicy::load(&source).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let onnx = dir.path().join("policy.onnx");
