@@ -141,7 +141,7 @@ class Robot:
         self.dadr = m.jnt_dofadr[self.jnt]
         self.extra_joints = sorted(set(hinges) - set(self.names))
         free = [j for j in range(m.njnt) if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
-        self.base = m.jnt_bodyid[free[0]]
+        self.base = self.root = m.jnt_bodyid[free[0]]
         self.free_q, self.free_v = m.jnt_qposadr[free[0]], m.jnt_dofadr[free[0]]
         self.default = np.asarray(io["default_joint_pos"], dtype=np.float64)
         self.kp = np.asarray(io["kp"], dtype=np.float64)
@@ -167,18 +167,26 @@ class Robot:
         m = self.m
         self.place(np.zeros(3), 0.0, self.default, height=10.0)
         collide = (m.geom_contype != 0) | (m.geom_conaffinity != 0)
-        self.legs = []  # dicts: name, joints (io indices), geoms, feet, hip (body of first joint)
-        for k, name in enumerate(self.names):
-            b = m.jnt_bodyid[self.jnt[k]]
-            while m.body_parentid[b] != self.base:
-                if b == 0 or m.body_parentid[b] == 0:
-                    raise BadInput(f"joint {name} is not below the base body {m.body(self.base).name}")
-                b = m.body_parentid[b]
-            leg = next((l for l in self.legs if l["root"] == b), None)
-            if leg is None:
-                leg = {"root": b, "joints": []}
-                self.legs.append(leg)
-            leg["joints"].append(k)
+        while True:
+            self.legs = []  # dicts: name, joints (io indices), geoms, feet, hip (first joint's body)
+            for k, name in enumerate(self.names):
+                b = m.jnt_bodyid[self.jnt[k]]
+                while m.body_parentid[b] != self.base:
+                    if b == 0 or m.body_parentid[b] == 0:
+                        raise BadInput(
+                            f"joint {name} is not below the base body {m.body(self.base).name}")
+                    b = m.body_parentid[b]
+                leg = next((l for l in self.legs if l["root"] == b), None)
+                if leg is None:
+                    leg = {"root": b, "joints": []}
+                    self.legs.append(leg)
+                leg["joints"].append(k)
+            # A root link fixed to the trunk (vendor URDFs' `base` → `trunk`) holds every leg in
+            # one subtree: the trunk, the body the legs branch from, is the base.
+            root = self.legs[0]["root"] if len(self.legs) == 1 else None
+            if root is None or any(m.jnt_bodyid[self.jnt[k]] == root for k in range(len(self.names))):
+                break
+            self.base = root
         floor = self.floor_geom
         for leg in self.legs:
             bodies = self._subtree(leg["root"])
@@ -196,11 +204,11 @@ class Robot:
             leg["name"] = _leg_name([self.names[k] for k in leg["joints"]], m.body(leg["root"]).name)
         # geom → role: leg index for foot geoms, -1 other robot geoms, -2 base geoms, -3 world.
         self.role = np.full(m.ngeom, -1)
-        robot_bodies = set(self._subtree(self.base))
+        robot_bodies = set(self._subtree(self.root))
         for g in range(m.ngeom):
             if m.geom_bodyid[g] not in robot_bodies:
                 self.role[g] = -3
-            elif m.geom_bodyid[g] == self.base:
+            elif m.geom_bodyid[g] in (self.base, self.root):
                 self.role[g] = -2
         self.leg_of = np.full(m.ngeom, -1)
         for i, leg in enumerate(self.legs):

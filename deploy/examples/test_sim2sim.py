@@ -213,6 +213,20 @@ class Sim2Sim(unittest.TestCase):
         self.assertEqual(r["passive"]["FR_hip_joint"],
                          {"damping": 0.5, "friction": 0.0, "armature": 0.0})
 
+    def test_vendor_urdfs_get_one_foot_group_per_leg(self):
+        # Vendor URDFs hang the trunk below a root link by a fixed joint (`base` → `trunk`): the
+        # legs branch from the trunk, not from the root (all four feet were grouped as one leg).
+        shared = os.environ.get("L3P_SHARED_DIR")
+        models = [Path(shared or "/nonexistent") / f for f in ("urdf/a1/a1.urdf", "urdf/go1/go1.urdf")]
+        if not all(m.is_file() for m in models):
+            print("skipped: vendor URDFs (set L3P_SHARED_DIR to a folder with urdf/a1, urdf/go1)")
+            return
+        for model in models:
+            code, r, err = run(EXPORT, "--model", model, "--stand", "--seeds", "1", "--seconds", "1")
+            self.assertEqual(code, 0, f"{model}: {err}")
+            self.assertEqual(sorted(r["feet"]), ["FL", "FR", "RL", "RR"], model)
+            self.assertTrue(all(len(g) >= 1 for g in r["feet"].values()), (model, r["feet"]))
+
     def test_missing_mujoco_exits_3_with_one_line(self):
         code = ("import sys, runpy; sys.modules['mujoco'] = None; "
                 f"sys.argv = ['sim2sim.py', '--help']; runpy.run_path({str(HERE / 'sim2sim.py')!r}, "
