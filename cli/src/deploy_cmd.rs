@@ -260,12 +260,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     let (config, zenoh) = args.net.load()?;
     let path = Path::new(&args.source);
     let bytes = if path.exists() {
-        let file = if path.is_dir() {
-            path.join("policy.safetensors")
-        } else {
-            path.to_path_buf()
-        };
-        std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?
+        crate::eval_cmd::read_export_bytes(path)?
     } else if let Some(data) = &args.data {
         l3p_registry::Registry::open(data)?
             .get_blob(&args.source)?

@@ -2,6 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
+use anyhow::Context;
 use clap::Args;
 use l3p_policy::DeployPolicy;
 use l3p_robots::config::TerrainPreset;
@@ -150,9 +151,21 @@ pub fn terrain_preset(name: &str) -> anyhow::Result<TerrainPreset> {
 
 /// Load a deployable policy from a path or from the local registry.
 pub fn load_policy(reference: &str, data_dir: &Path) -> anyhow::Result<DeployPolicy> {
+    Ok(load_policy_bytes(reference, data_dir)?.1)
+}
+
+/// [`load_policy`] with the export's safetensors bytes it was read from (its config is in their
+/// metadata), for tools that hand the export on.
+pub fn load_policy_bytes(
+    reference: &str,
+    data_dir: &Path,
+) -> anyhow::Result<(Vec<u8>, DeployPolicy)> {
     let path = Path::new(reference);
     if path.exists() {
-        return Ok(DeployPolicy::load(path)?);
+        let bytes = read_export_bytes(path)?;
+        let policy = DeployPolicy::from_bytes(&bytes)
+            .with_context(|| format!("reading the export {}", path.display()))?;
+        return Ok((bytes, policy));
     }
     let registry = l3p_registry::Registry::open(data_dir)?;
     let (meta, bytes) = registry.get_blob(reference)?;
@@ -162,7 +175,18 @@ pub fn load_policy(reference: &str, data_dir: &Path) -> anyhow::Result<DeployPol
             meta.kind
         );
     }
-    Ok(DeployPolicy::from_bytes(&bytes)?)
+    let policy = DeployPolicy::from_bytes(&bytes)?;
+    Ok((bytes, policy))
+}
+
+/// The bytes of an export file, or of `policy.safetensors` in an export directory.
+pub fn read_export_bytes(path: &Path) -> anyhow::Result<Vec<u8>> {
+    let file = if path.is_dir() {
+        path.join("policy.safetensors")
+    } else {
+        path.to_path_buf()
+    };
+    std::fs::read(&file).with_context(|| format!("reading {}", file.display()))
 }
 
 /// One evaluation: settings in, tracking + gait + walk verdict out.

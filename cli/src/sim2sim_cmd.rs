@@ -107,7 +107,7 @@ impl Sim2SimArgs {
             json: true,
             require_pass: false,
             data_dir: PathBuf::from("l3p-data"),
-            python: std::env::var("L3P_PYTHON").unwrap_or_else(|_| "python3".into()),
+            python: python_interpreter(),
             script_args: Vec::new(),
         }
     }
@@ -247,7 +247,7 @@ impl Workspace {
         let dir = tempfile::Builder::new().prefix("l3p-sim2sim").tempdir()?;
         std::fs::write(dir.path().join("sim2sim.py"), SCRIPT)?;
         std::fs::write(dir.path().join("numpy_policy.py"), NUMPY_POLICY)?;
-        let (bytes, policy) = policy_bytes(&args.policy, &args.data_dir)
+        let (bytes, policy) = crate::eval_cmd::load_policy_bytes(&args.policy, &args.data_dir)
             .with_context(|| format!("loading the policy {}", args.policy))?;
         let policy_dir = dir.path().join("policy");
         std::fs::create_dir(&policy_dir)?;
@@ -269,28 +269,6 @@ impl Workspace {
             model,
         })
     }
-}
-
-/// The export's safetensors bytes (its config is in their metadata), from a path or the local
-/// registry, checked by loading them.
-fn policy_bytes(
-    reference: &str,
-    data_dir: &Path,
-) -> anyhow::Result<(Vec<u8>, l3p_policy::DeployPolicy)> {
-    let path = Path::new(reference);
-    let bytes = if path.exists() {
-        let file = if path.is_dir() {
-            path.join("policy.safetensors")
-        } else {
-            path.to_path_buf()
-        };
-        std::fs::read(&file).with_context(|| format!("reading {}", file.display()))?
-    } else {
-        let registry = l3p_registry::Registry::open(data_dir)?;
-        registry.get_blob(reference)?.1
-    };
-    let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
-    Ok((bytes, policy))
 }
 
 /// Plays the policy under one variant and returns the script's table and JSON.
@@ -343,6 +321,11 @@ fn run_variant(
         table: stderr,
         json,
     })
+}
+
+/// The Python interpreter sim2sim runs: `$L3P_PYTHON`, else `python3` (`--python`'s default).
+pub fn python_interpreter() -> String {
+    std::env::var("L3P_PYTHON").unwrap_or_else(|_| "python3".into())
 }
 
 /// Fails with the install hint unless `python` imports numpy and mujoco.

@@ -401,9 +401,7 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
     let mut every = u64::MAX;
     if args.flags.sim2sim {
         // Found out now, not after the first passing check an hour in.
-        crate::sim2sim_cmd::check_python(
-            &crate::sim2sim_cmd::Sim2SimArgs::walk_check(std::path::Path::new("."), 0.0).python,
-        )?;
+        crate::sim2sim_cmd::check_python(&crate::sim2sim_cmd::python_interpreter())?;
     }
     if args.flags.until_walks {
         every = every.min(args.flags.eval_every.max(1));
