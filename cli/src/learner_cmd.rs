@@ -48,6 +48,7 @@ pub fn learner_options(config: &Config, use_registry: bool) -> anyhow::Result<Le
         } else {
             Vec::new()
         },
+        transfer_maps: runtime::transfer_maps(config, &robots)?,
     })
 }
 

@@ -127,6 +127,50 @@ pub fn mirror(config: &Config, robot: &Robot) -> anyhow::Result<l3p_learner::Mir
     })
 }
 
+/// `[ppo] transfer_heads = "mapped"`: the morphology map from the init checkpoint's prototype
+/// (first) robot to each configured robot (empty otherwise).
+pub fn transfer_maps(
+    config: &Config,
+    robots: &[&Robot],
+) -> anyhow::Result<Vec<(String, l3p_policy::HeadMap)>> {
+    let from = match (&config.learner.init_from, config.ppo.transfer_heads) {
+        (Some(from), l3p_learner::TransferHeads::Mapped) => from,
+        _ => return Ok(Vec::new()),
+    };
+    let source = l3p_policy::load_checkpoint(from, &l3p_policy::cpu_device())
+        .map_err(|e| anyhow::anyhow!("loading {}: {e}", from.display()))?;
+    let prototype = source
+        .model
+        .robots
+        .first()
+        .ok_or_else(|| anyhow::anyhow!("{}: a checkpoint without robots", from.display()))?;
+    let prototype = Robot::by_name(&prototype.name).map_err(|e| {
+        anyhow::anyhow!("transfer_heads = \"mapped\" needs the prototype's model: {e}")
+    })?;
+    robots
+        .iter()
+        .map(|r| {
+            let m = l3p_robots::morphology::TransferMap::new(
+                prototype,
+                r,
+                config.env.height_scan,
+                config.env.gait_clock_hz > 0.0,
+            )
+            .map_err(|e| anyhow::anyhow!("mapping {} onto {}: {e}", prototype.name, r.name))?;
+            Ok((
+                r.name.to_string(),
+                l3p_policy::HeadMap {
+                    obs_dim: m.obs_dim,
+                    observation: m.observation,
+                    action_dim: l3p_robots::catalog::NUM_JOINTS,
+                    action: m.action,
+                    action_inverse: m.action_inverse,
+                },
+            ))
+        })
+        .collect()
+}
+
 /// The policy's description of a robot under this config, with the controller contract
 /// ([`l3p_policy::RobotIo`]) that travels into checkpoints and deploy artifacts.
 pub fn policy_robot(config: &Config, robot: &Robot) -> anyhow::Result<l3p_policy::PolicyRobot> {

@@ -141,6 +141,7 @@ fn bench_in_pool(cfg: &LearnerBenchConfig) -> Result<LearnerBenchReport, Learner
         vec![spec],
         None,
         crate::TransferHeads::Fresh,
+        &[],
         &device,
     )?;
     let mut ppo = Ppo::new(ppo_cfg, model, device)?;

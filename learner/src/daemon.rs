@@ -94,6 +94,9 @@ pub struct LearnerOptions {
     pub obs_clip: f32,
     /// Left-right mirror maps per robot name, for `[ppo] symmetry_coef`.
     pub mirrors: Vec<(String, Mirror)>,
+    /// Maps from the checkpoint's prototype robot to each new robot, for
+    /// `[ppo] transfer_heads = "mapped"`.
+    pub transfer_maps: Vec<(String, l3p_policy::HeadMap)>,
 }
 
 /// How long a stopping learner waits for queued registry uploads.
@@ -219,6 +222,7 @@ fn load_or_init_ppo(
         opts.robots.clone(),
         init_from,
         opts.ppo.transfer_heads,
+        &opts.transfer_maps,
         &device,
     )?;
     info!(mode = opts.ppo.mode.as_str(), "{}", model.param_report());

@@ -46,7 +46,7 @@ pub use ppo::{
 pub use storage::{RobotRollout, RolloutBatch};
 
 use burn::tensor::Device;
-use l3p_policy::{PolicyConfig, PolicyError, PolicyModel, PolicyRobot};
+use l3p_policy::{HeadMap, PolicyConfig, PolicyError, PolicyModel, PolicyRobot};
 
 /// Errors of the learner library.
 #[derive(Debug, thiserror::Error)]
@@ -72,12 +72,16 @@ pub enum LearnerError {
 /// - `l3p-transfer`: the core of an L3P checkpoint (frozen later by [`Ppo::new`]); robots present in
 ///   the checkpoint keep their adapters (terrain transfer), new robots get fresh adapters, or with
 ///   [`TransferHeads::Prototype`] a copy of the prototype's.
+///
+/// With [`TransferHeads::Mapped`] (either transfer mode) a new robot's copy of the prototype's heads
+/// has its entry of `maps` (by robot name, from the prototype's spaces to the robot's) folded in.
 pub fn init_model(
     mode: Mode,
     mut config: PolicyConfig,
     robots: Vec<PolicyRobot>,
     init_from: Option<&std::path::Path>,
     heads: TransferHeads,
+    maps: &[(String, HeadMap)],
     device: &Device,
 ) -> Result<PolicyModel, LearnerError> {
     config.arch = mode.arch();
@@ -94,7 +98,7 @@ pub fn init_model(
         ))),
         (_, Some(path)) => {
             let ck = l3p_policy::load_checkpoint(path, device)?;
-            transfer_model(mode, ck.model, robots, heads, device)
+            transfer_model(mode, ck.model, robots, heads, maps, device)
         }
     }
 }
@@ -105,6 +109,7 @@ pub fn transfer_model(
     source: PolicyModel,
     robots: Vec<PolicyRobot>,
     heads: TransferHeads,
+    maps: &[(String, HeadMap)],
     device: &Device,
 ) -> Result<PolicyModel, LearnerError> {
     if source.config.arch != mode.arch() {
@@ -128,12 +133,26 @@ pub fn transfer_model(
                 )));
             }
             fresh.net.robots[k] = source.net.robots[j].clone();
-        } else if mode == Mode::MlpTransfer || heads == TransferHeads::Prototype {
+        } else if mode == Mode::MlpTransfer || heads != TransferHeads::Fresh {
             match (&proto, &proto_spec) {
                 (Some(h), Some(s))
                     if s.obs_dim == spec.obs_dim && s.action_dim == spec.action_dim =>
                 {
-                    fresh.net.robots[k] = h.clone();
+                    fresh.net.robots[k] = if heads == TransferHeads::Mapped {
+                        let map = maps
+                            .iter()
+                            .find(|(name, _)| *name == spec.name)
+                            .map(|(_, m)| m)
+                            .ok_or_else(|| {
+                                LearnerError::Config(format!(
+                                    "robot {}: transfer_heads = \"mapped\" but no map from {}",
+                                    spec.name, s.name
+                                ))
+                            })?;
+                        h.clone().map_spaces(map)?
+                    } else {
+                        h.clone()
+                    };
                 }
                 _ => {
                     return Err(LearnerError::Config(format!(

@@ -38,6 +38,7 @@ fn learns(mode: Mode) {
         vec![PolicyRobot::new("pm", OBS, ACT)],
         None,
         TransferHeads::Fresh,
+        &[],
         &device,
     )
     .unwrap();

@@ -46,6 +46,7 @@ fn fresh_model(mode: Mode, robot: &str) -> PolicyModel {
         vec![PolicyRobot::new(robot, OBS, ACT)],
         None,
         TransferHeads::Fresh,
+        &[],
         &train_device(),
     )
     .unwrap()
@@ -64,6 +65,7 @@ fn transferred_model(
         vec![PolicyRobot::new(robot, OBS, ACT)],
         Some(path),
         heads,
+        &[],
         &train_device(),
     )
 }
@@ -248,6 +250,7 @@ fn l3p_transfer_with_prototype_heads_starts_as_the_source_policy() {
             vec![robot],
             Some(&path),
             heads,
+            &[],
             &train_device(),
         )
     };
@@ -281,6 +284,74 @@ fn l3p_transfer_with_prototype_heads_starts_as_the_source_policy() {
     );
 }
 
+/// A random-looking invertible map: identity plus a small dense part.
+fn square_map(n: usize, seed: f32) -> Vec<f32> {
+    (0..n * n)
+        .map(|i| {
+            f32::from(u8::from(i % (n + 1) == 0)) * 1.5 + 0.2 * (i as f32 * seed).sin() / n as f32
+        })
+        .collect()
+}
+
+fn mat_vec_rows(m: &[f32], x: &[f32], n: usize) -> Vec<f32> {
+    x.chunks(n)
+        .flat_map(|row| {
+            (0..n)
+                .map(|r| (0..n).map(|c| m[r * n + c] * row[c]).sum::<f32>())
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// `mapped` heads act on the new robot as the source acted on the mapped observation, with the
+/// mapped action: `π_t(x) = M_a π_s(M_o x)`, under both architectures; the std and the critic follow.
+#[test]
+fn mapped_heads_fold_the_maps_into_the_copy() {
+    for (pre, mode) in [
+        (Mode::L3p, Mode::L3pTransfer),
+        (Mode::Mlp, Mode::MlpTransfer),
+    ] {
+        let src = fresh_model(pre, "a1");
+        let x: Vec<f32> = (0..3 * OBS).map(|i| (i as f32 * 0.37).sin()).collect();
+        let (mo, ma) = (square_map(OBS, 0.7), square_map(ACT, 1.3));
+        let want = mat_vec_rows(
+            &ma,
+            &src.act_mean_host(0, &mat_vec_rows(&mo, &x, OBS)).unwrap(),
+            ACT,
+        );
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("a1.ckpt");
+        ppo_for(pre, src).save(&path).unwrap();
+        let map = l3p_policy::HeadMap {
+            obs_dim: OBS,
+            observation: mo.clone(),
+            action_dim: ACT,
+            action: ma.clone(),
+            action_inverse: vec![0.0; ACT * ACT],
+        };
+        let load = |maps: &[(String, l3p_policy::HeadMap)]| {
+            init_model(
+                mode,
+                small_config(),
+                vec![PolicyRobot::new("go1", OBS, ACT)],
+                Some(&path),
+                TransferHeads::Mapped,
+                maps,
+                &train_device(),
+            )
+        };
+        let mapped = load(&[("go1".to_string(), map)]).unwrap();
+        let got = mapped.act_mean_host(0, &x).unwrap();
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() < 1e-4, "{mode:?}: {got:?} vs {want:?}");
+        }
+        let std = tensor_to_vec(mapped.net.robots[0].std()).unwrap();
+        assert!(std.iter().all(|s| *s > 0.0 && s.is_finite()));
+        let err = load(&[]).unwrap_err().to_string();
+        assert!(err.contains("go1") && err.contains("mapped"), "{err}");
+    }
+}
+
 #[test]
 fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
     let model = fresh_model(Mode::L3p, "pm");
@@ -311,6 +382,7 @@ fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
             vec![PolicyRobot::new("go1", OBS, ACT)],
             None,
             TransferHeads::Fresh,
+            &[],
             &train_device()
         )
         .unwrap_err()

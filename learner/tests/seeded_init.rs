@@ -23,6 +23,7 @@ fn fresh_core_hash(seed: u64) -> String {
         vec![PolicyRobot::new("pm", 6, 2)],
         None,
         TransferHeads::Fresh,
+        &[],
         &device,
     )
     .unwrap();

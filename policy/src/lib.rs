@@ -8,7 +8,9 @@
 //!   [`PolicyNet`] (one shared core, a [`RobotHeads`] per robot: encoder `E_r`, decoder `D_r`, std,
 //!   critic, `R_obs` [`ObsDiffusion`], `R_act`). [`PolicyNet::actors`] runs several robots through the
 //!   shared core in one batch; [`PolicyModel::freeze_core`], [`PolicyModel::add_robot`],
-//!   [`PolicyModel::param_report`], [`PolicyModel::act_mean_host`].
+//!   [`PolicyModel::param_report`], [`PolicyModel::act_mean_host`]; [`HeadMap`] folds linear maps
+//!   of a robot's observations and actions into a copy of another robot's heads
+//!   ([`RobotHeads::map_spaces`], the `mapped` transfer warm start).
 //! - Distribution: [`gaussian_log_prob`], [`gaussian_entropy`].
 //! - I/O ([`checkpoint`], the only module that reads or writes model files):
 //!   [`checkpoint_to_bytes`] / [`checkpoint_from_bytes`] / [`save_checkpoint`] / [`load_checkpoint`]
@@ -21,6 +23,7 @@
 
 pub mod checkpoint;
 pub mod diffusion;
+pub mod headmap;
 pub mod model;
 pub mod nets;
 
@@ -33,6 +36,7 @@ pub use checkpoint::{
     export_bytes, export_to_dir, is_checkpoint, load_checkpoint, save_checkpoint, write_atomic,
 };
 pub use diffusion::{DdpmSchedule, ObsDiffusion, ObsDiffusionConfig};
+pub use headmap::HeadMap;
 pub use l3p_infer::{
     Arch, IO_VERSION, ObsSegment, PolicyConfig, PolicyRobot, RecoveryConfig, RobotIo, mlp_params,
 };

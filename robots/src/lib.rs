@@ -26,6 +26,8 @@
 //!   walk criterion of `l3p eval` / `l3p bench walk`.
 //! - [`mirror::TaskMirror`]: the left-right observation and action maps of a robot's task, derived
 //!   from its geometry (PPO's symmetry loss).
+//! - [`morphology::TransferMap`]: the observation and action maps that carry a policy from one
+//!   robot to another as equal foot displacements (the `mapped` transfer warm start).
 //! - [`added::describe`] → [`added::RobotDescription`] (a user's URDF as a robot: inferred legs,
 //!   standing pose, gains; the TOML of `l3p robots add`), [`added::register`] / [`added::load_dir`]
 //!   make it a [`catalog::RobotSpec`] that `RobotSpec::by_name` finds.
@@ -50,6 +52,7 @@ pub mod io;
 pub mod math;
 pub mod mirror;
 pub mod model;
+pub mod morphology;
 pub mod task;
 pub mod terrain;
 pub mod urdf;

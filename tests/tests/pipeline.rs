@@ -37,6 +37,7 @@ fn one_iteration_from_simulator_to_updated_policy() {
         vec![spec],
         None,
         TransferHeads::Fresh,
+        &[],
         &device,
     )
     .unwrap();
