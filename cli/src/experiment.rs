@@ -125,6 +125,15 @@ pub struct ExperimentSection {
     /// Simulator threads per actor (default: the base config's first actor).
     #[serde(default)]
     pub threads: Option<usize>,
+    /// Samples to walk: every arm trains with `--until-walks` and stops when the walk criterion
+    /// holds; each stage's `iterations` is then a cap. The report's first table is samples to walk.
+    #[serde(default)]
+    pub until_walks: bool,
+    /// Run target arms robot by robot (every method and variant of the first robot, then the
+    /// next), so that a partial run already compares the methods on some robots; the default runs
+    /// the main grid, then each variant.
+    #[serde(default)]
+    pub by_robot: bool,
 }
 
 fn default_data_dir() -> PathBuf {
@@ -353,6 +362,8 @@ pub struct Arm {
     pub iterations: u64,
     /// The pretraining arm whose final checkpoint this arm starts from.
     pub depends_on: Option<String>,
+    /// Trains with `--until-walks` (`iterations` is a cap).
+    pub until_walks: bool,
     /// The arm's complete training config (run name, seed, data dir, mode, actors, init_from).
     pub config: Config,
 }
@@ -370,12 +381,22 @@ impl Arm {
 
     /// The `l3p train` invocation of this arm, given where its config file lives.
     pub fn command(&self, config_file: &Path) -> Vec<String> {
-        vec![
+        let mut c: Vec<String> = vec![
             "l3p".into(),
             "train".into(),
             config_file.display().to_string(),
             "--quiet".into(),
-        ]
+        ];
+        if self.until_walks {
+            c.push("--until-walks".into());
+        }
+        c
+    }
+
+    /// Samples one iteration collects (every actor's envs × steps per env).
+    pub fn samples_per_iteration(&self) -> u64 {
+        let envs: usize = self.config.actors.iter().map(|a| a.envs).sum();
+        (envs * self.config.rollout.steps_per_env) as u64
     }
 }
 
@@ -465,6 +486,7 @@ pub fn plan(spec: &ExperimentSpec, base: &Config) -> anyhow::Result<Vec<Arm>> {
             seed: r.seed,
             iterations: r.iterations,
             depends_on: r.depends_on,
+            until_walks: spec.experiment.until_walks,
             config,
         })
     };
@@ -543,6 +565,22 @@ pub fn plan(spec: &ExperimentSpec, base: &Config) -> anyhow::Result<Vec<Arm>> {
             }
         }
     }
+    if spec.experiment.by_robot {
+        let mut robots: Vec<&str> = Vec::new();
+        for arm in arms.iter().filter(|a| a.stage == Stage::Target) {
+            if !robots.contains(&arm.robots[0].as_str()) {
+                robots.push(&arm.robots[0]);
+            }
+        }
+        let rank = |a: &Arm| match a.stage {
+            Stage::Pretrain => 0,
+            Stage::Target => 1 + robots.iter().position(|r| *r == a.robots[0]).unwrap_or(0),
+        };
+        let mut ranked: Vec<(usize, Arm)> = arms.iter().map(|a| (rank(a), a.clone())).collect();
+        // Stable: pretraining first, then within a robot the main grid, then the variants.
+        ranked.sort_by_key(|(r, _)| *r);
+        arms = ranked.into_iter().map(|(_, a)| a).collect();
+    }
     let mut names: Vec<&str> = arms.iter().map(|a| a.name.as_str()).collect();
     names.sort_unstable();
     if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
@@ -585,6 +623,134 @@ pub struct ArmDone {
     /// robot on that terrain alone before any fine-tuning — the skill fine-tuning kept or lost.
     #[serde(default)]
     pub zero_shot_by_terrain: BTreeMap<String, crate::eval_cmd::EvalRow>,
+    /// `until_walks` experiments: when the walk criterion held, or that it did not within the cap.
+    #[serde(default)]
+    pub walk: Option<WalkOutcome>,
+    /// `until_walks` transfer arms: the walk check of the policy the arm starts from (its
+    /// iteration-0 model, transfer heads included), before any fine-tuning.
+    #[serde(default)]
+    pub zero_shot_walk: Option<WalkOutcome>,
+}
+
+/// An arm's walk criterion verdict (`l3p train --until-walks`, at the walk check's 5 ms physics).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct WalkOutcome {
+    pub walks: bool,
+    /// The passing check's iteration, or the cap when it did not walk (a lower bound).
+    pub iteration: u64,
+    /// The last walk check's iteration (0: none).
+    #[serde(default)]
+    pub last_check: u64,
+    /// Samples to the checked iteration (walked) or to the cap (a lower bound on samples to walk).
+    pub samples: u64,
+    /// Wall-clock to the passing check over every attempt (walked only).
+    #[serde(default)]
+    pub wall_seconds: Option<f64>,
+    /// The bounds the last check failed (empty when it walks).
+    #[serde(default)]
+    pub failures: Vec<String>,
+    /// Walk checks recorded in `walk_checks.jsonl`.
+    #[serde(default)]
+    pub checks: usize,
+    /// The first check that failed no bound but the heading bound (a gait that tracks, stands
+    /// tall, steps and is smooth, turning or not): its iteration and samples.
+    #[serde(default)]
+    pub gait: Option<(u64, u64)>,
+    /// The checked rows (0.5 and 1.0 m/s; only 1.0 when it failed there).
+    #[serde(default)]
+    pub rows: Vec<crate::eval_cmd::EvalRow>,
+}
+
+/// How the walk criterion's heading bound words its failure (`l3p_robots::gait::WalkCriterion`).
+pub const HEADING_FAILURE: &str = "heading changes";
+
+/// Where an `--until-walks` arm stands once its trainer exited.
+#[derive(Debug, Clone, PartialEq)]
+pub enum WalkProgress {
+    /// The criterion held (or the cap was reached without it): the arm is finished.
+    Settled(WalkOutcome),
+    /// Stopped before the cap without walking (interrupted): resume it; its check history stays
+    /// in `walk_checks.jsonl`.
+    Interrupted { iteration: u64 },
+}
+
+/// Reads an `--until-walks` run's `walk.json` and `walk_checks.jsonl`. `reached` is the last
+/// trained iteration, `cap` the arm's iteration cap; `earlier_wall` the seconds of the attempts
+/// before the one that wrote `walk.json`.
+pub fn walk_progress(
+    run_dir: &Path,
+    reached: u64,
+    cap: u64,
+    samples_per_iteration: u64,
+    earlier_wall: f64,
+) -> WalkProgress {
+    let walk: serde_json::Value = std::fs::read_to_string(run_dir.join("walk.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or(serde_json::Value::Null);
+    let checks: Vec<serde_json::Value> = std::fs::read_to_string(run_dir.join("walk_checks.jsonl"))
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect();
+    let rows_of = |v: &serde_json::Value| -> Vec<crate::eval_cmd::EvalRow> {
+        serde_json::from_value(v["rows"].clone()).unwrap_or_default()
+    };
+    let gait = checks
+        .iter()
+        .find(|c| {
+            c["rows"].as_array().is_some_and(|rows| {
+                !rows.is_empty()
+                    && rows.iter().all(|r| {
+                        r["walk_failures"].as_array().is_some_and(|f| {
+                            f.iter()
+                                .all(|x| x.as_str().is_some_and(|x| x.starts_with(HEADING_FAILURE)))
+                        })
+                    })
+            })
+        })
+        .and_then(|c| c["iteration"].as_u64())
+        .map(|i| (i, i * samples_per_iteration));
+    if walk["walks"].as_bool() == Some(true) {
+        let iteration = walk["iteration"].as_u64().unwrap_or(reached);
+        return WalkProgress::Settled(WalkOutcome {
+            walks: true,
+            iteration,
+            samples: walk["samples"]
+                .as_u64()
+                .unwrap_or(iteration * samples_per_iteration),
+            last_check: iteration,
+            wall_seconds: walk["wall_clock_s"].as_f64().map(|s| s + earlier_wall),
+            failures: Vec::new(),
+            checks: checks.len(),
+            gait,
+            rows: rows_of(&walk),
+        });
+    }
+    if reached < cap {
+        return WalkProgress::Interrupted { iteration: reached };
+    }
+    let last = checks.last().cloned().unwrap_or(serde_json::Value::Null);
+    let rows = rows_of(&last);
+    // Read from the JSON itself: a row an older or newer `l3p` wrote still names its failures.
+    let failures = last["rows"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .flat_map(|r| r["walk_failures"].as_array().cloned().unwrap_or_default())
+        .filter_map(|f| f.as_str().map(str::to_string))
+        .collect();
+    WalkProgress::Settled(WalkOutcome {
+        walks: false,
+        iteration: cap,
+        last_check: last["iteration"].as_u64().unwrap_or(0),
+        samples: cap * samples_per_iteration,
+        wall_seconds: None,
+        failures,
+        checks: checks.len(),
+        gait,
+        rows,
+    })
 }
 
 /// Where an arm stands, from its files.
@@ -682,6 +848,9 @@ pub struct ArmResult {
     /// fine-tuning (`ArmDone::zero_shot_by_terrain`), with its pretraining arm's name and method
     /// label (arms sharing a pretraining arm share these values).
     pub zero_shot_reach: Option<ZeroShotReach>,
+    /// `until_walks` experiments: [`ArmDone::walk`] and [`ArmDone::zero_shot_walk`].
+    pub walk: Option<WalkOutcome>,
+    pub zero_shot_walk: Option<WalkOutcome>,
 }
 
 /// The pretrained policy's per-terrain levels on a target robot, before fine-tuning.
@@ -1026,3 +1195,162 @@ pub fn band(curves: &[Vec<(f64, f64)>]) -> Vec<(f64, f64, f64, f64)> {
 
 #[cfg(test)]
 mod tests;
+
+/// A median over seeds where an arm that did not walk counts as its cap: `at_least` when such an
+/// arm decides the median (the true median is then at least `value`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CensoredMedian {
+    pub value: f64,
+    pub at_least: bool,
+}
+
+/// Median of `(value, censored)` pairs, censored values being lower bounds.
+pub fn censored_median(values: &[(f64, bool)]) -> Option<CensoredMedian> {
+    if values.is_empty() {
+        return None;
+    }
+    let mut v = values.to_vec();
+    // Censored values sort after exact ones of the same size: they are at least that large.
+    v.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let n = v.len();
+    let (lo, hi) = (v[(n - 1) / 2], v[n / 2]);
+    Some(CensoredMedian {
+        value: (lo.0 + hi.0) / 2.0,
+        at_least: lo.1 || hi.1,
+    })
+}
+
+/// `transfer / scratch` of two censored medians: `≤` when only scratch is a lower bound, `≥` when
+/// only transfer is, `?` when both are.
+pub fn censored_ratio(transfer: CensoredMedian, scratch: CensoredMedian) -> String {
+    let r = transfer.value / scratch.value;
+    match (transfer.at_least, scratch.at_least) {
+        (false, false) => format!("{r:.2}×"),
+        (false, true) => format!("≤ {r:.2}×"),
+        (true, false) => format!("≥ {r:.2}×"),
+        (true, true) => "?".into(),
+    }
+}
+
+/// The samples-to-walk table of an `until_walks` experiment: per target (robot, method) the seeds
+/// that walked within the cap, the median and range of samples to walk (an arm that did not walk
+/// counts as its cap, marked `>`), its ratio to the same robot's from-scratch arms of the same
+/// family, and how many of the policies the arms started from walked before any fine-tuning.
+/// Empty when no arm has a walk outcome.
+pub fn samples_to_walk_table(results: &[ArmResult]) -> String {
+    let mut keys: Vec<(String, Mode, Option<String>)> = results
+        .iter()
+        .filter(|r| r.walk.is_some())
+        .map(|r| (r.robot.clone(), r.method, r.variant.clone()))
+        .collect();
+    if keys.is_empty() {
+        return String::new();
+    }
+    keys.sort_by_key(|(robot, m, v)| (robot.clone(), v.clone(), method_rank(*m)));
+    keys.dedup();
+    let group = |robot: &str, method: Mode, variant: Option<&str>| -> Vec<&ArmResult> {
+        results
+            .iter()
+            .filter(|r| {
+                r.robot == robot
+                    && r.method == method
+                    && r.variant.as_deref() == variant
+                    && r.walk.is_some()
+            })
+            .collect()
+    };
+    let samples = |arms: &[&ArmResult]| -> Vec<(f64, bool)> {
+        arms.iter()
+            .filter_map(|r| r.walk.as_ref())
+            .map(|w| (w.samples as f64 / 1e6, !w.walks))
+            .collect()
+    };
+    let mut md = String::from(
+        "| robot | method | walked | samples to walk, median (M) | range (M) | vs scratch | iterations, median | gait without the heading bound: median (M), vs scratch | started walking |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
+    );
+    for (robot, method, variant) in &keys {
+        let arms = group(robot, *method, variant.as_deref());
+        let s = samples(&arms);
+        let walked = s.iter().filter(|(_, c)| !c).count();
+        let median = censored_median(&s);
+        let fmt = |(v, c): (f64, bool)| format!("{}{v:.2}", if c { ">" } else { "" });
+        let (lo, hi) = (
+            s.iter().copied().min_by(|a, b| a.0.total_cmp(&b.0)),
+            s.iter().copied().max_by(|a, b| a.0.total_cmp(&b.0)),
+        );
+        let range = match (lo, hi) {
+            (Some(lo), Some(hi)) => format!("{}–{}", fmt(lo), fmt(hi)),
+            _ => "—".into(),
+        };
+        let scratch_method = transfer_source(*method).unwrap_or(*method);
+        let vs = if transfer_source(*method).is_none() && variant.is_none() {
+            "1×".to_string()
+        } else {
+            match (
+                median,
+                censored_median(&samples(&group(robot, scratch_method, None))),
+            ) {
+                (Some(t), Some(sc)) => censored_ratio(t, sc),
+                _ => "—".into(),
+            }
+        };
+        let its: Vec<(f64, bool)> = arms
+            .iter()
+            .filter_map(|r| r.walk.as_ref())
+            .map(|w| (w.iteration as f64, !w.walks))
+            .collect();
+        let its = censored_median(&its)
+            .map(|m| format!("{}{:.0}", if m.at_least { "≥ " } else { "" }, m.value))
+            .unwrap_or_else(|| "—".into());
+        let gait_samples = |arms: &[&ArmResult]| -> Vec<(f64, bool)> {
+            arms.iter()
+                .filter_map(|r| r.walk.as_ref())
+                .map(|w| match w.gait {
+                    Some((_, samples)) => (samples as f64 / 1e6, false),
+                    None => (w.samples as f64 / 1e6, true),
+                })
+                .collect()
+        };
+        let gait_median = censored_median(&gait_samples(&arms));
+        let gait = match gait_median {
+            Some(g) => {
+                let vs = if transfer_source(*method).is_none() && variant.is_none() {
+                    "1×".to_string()
+                } else {
+                    censored_median(&gait_samples(&group(robot, scratch_method, None)))
+                        .map_or_else(|| "—".into(), |sc| censored_ratio(g, sc))
+                };
+                format!("{}{:.2}, {vs}", if g.at_least { "≥ " } else { "" }, g.value)
+            }
+            None => "—".into(),
+        };
+        let zero: Vec<bool> = arms
+            .iter()
+            .filter_map(|r| r.zero_shot_walk.as_ref().map(|w| w.walks))
+            .collect();
+        let zero = if zero.is_empty() {
+            "—".to_string()
+        } else {
+            format!("{}/{}", zero.iter().filter(|w| **w).count(), zero.len())
+        };
+        md.push_str(&format!(
+            "| {robot} | {} | {walked}/{} | {} | {range} | {vs} | {its} | {gait} | {zero} |\n",
+            method_label(*method, variant.as_deref()),
+            s.len(),
+            median
+                .map(|m| format!("{}{:.2}", if m.at_least { "≥ " } else { "" }, m.value))
+                .unwrap_or_else(|| "—".into()),
+        ));
+    }
+    md
+}
+
+fn method_rank(m: Mode) -> u8 {
+    match m {
+        Mode::Mlp => 0,
+        Mode::L3p => 1,
+        Mode::MlpTransfer => 2,
+        Mode::L3pTransfer => 3,
+    }
+}

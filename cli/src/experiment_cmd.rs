@@ -17,8 +17,9 @@ use l3p_robots::config::TerrainPreset;
 
 use crate::config::Config;
 use crate::experiment::{
-    Arm, ArmDone, ArmResult, ArmState, ExperimentSpec, Stage, arm_config_path, arm_state, band,
-    live_pid, markdown_table, plan, read_done,
+    Arm, ArmDone, ArmResult, ArmState, ExperimentSpec, Stage, WalkOutcome, WalkProgress,
+    arm_config_path, arm_state, band, live_pid, markdown_table, plan, read_done,
+    samples_to_walk_table, walk_progress,
 };
 use crate::runtime;
 
@@ -198,6 +199,8 @@ struct Running {
     arm: usize,
     child: Child,
     started: Instant,
+    /// The arm's training seconds before this attempt.
+    earlier_wall: f64,
 }
 
 fn run_cmd(spec_path: &Path) -> anyhow::Result<()> {
@@ -238,6 +241,7 @@ fn run_cmd(spec_path: &Path) -> anyhow::Result<()> {
                 let _ = std::fs::remove_file(arm.data_dir().join("running.pid"));
                 settled[r.arm] = true;
                 let wall = add_wall_seconds(arm, r.started.elapsed().as_secs_f64())?;
+                let earlier_wall = r.earlier_wall;
                 // Stopping: no evaluation either (it can take minutes); the next run resumes
                 // the training or evaluates what finished.
                 if cancel.is_cancelled() {
@@ -248,7 +252,17 @@ fn run_cmd(spec_path: &Path) -> anyhow::Result<()> {
                     );
                     continue;
                 }
-                match finish_arm(&spec, &arms, arm, status, wall) {
+                match finish_arm(
+                    &spec,
+                    &arms,
+                    arm,
+                    status
+                        .success()
+                        .then_some(())
+                        .ok_or_else(|| status.to_string()),
+                    wall,
+                    earlier_wall,
+                ) {
                     Ok(()) => println!("arm {} done", arm.name),
                     Err(e) => {
                         let message = format!("{e:#}");
@@ -276,6 +290,28 @@ fn run_cmd(spec_path: &Path) -> anyhow::Result<()> {
             // Polled every half second: only the marker files, never the metrics.
             if read_done(arm).is_some() {
                 settled[k] = true;
+                continue;
+            }
+            // Walked, but its evaluation did not finish (interrupted): finish it without
+            // training on past the passing check.
+            if arm.until_walks && walked_already(arm) && live_pid(arm).is_none() {
+                settled[k] = true;
+                let wall = read_wall_seconds(arm);
+                let walk_clock = walk_clock_seconds(arm);
+                match finish_arm(
+                    &spec,
+                    &arms,
+                    arm,
+                    Ok(()),
+                    wall,
+                    (wall - walk_clock).max(0.0),
+                ) {
+                    Ok(()) => println!("arm {} done (it had walked)", arm.name),
+                    Err(e) => {
+                        eprintln!("arm {} failed: {e:#}", arm.name);
+                        failed.push(arm.name.clone());
+                    }
+                }
                 continue;
             }
             if let Some(pid) = live_pid(arm) {
@@ -356,10 +392,12 @@ fn start_arm(exe: &Path, dir: &Path, arm: &Arm, index: usize) -> anyhow::Result<
         arm.iterations,
         log_path.display()
     );
-    let child = Command::new(exe)
-        .arg("train")
-        .arg(&config)
-        .arg("--quiet")
+    let mut command = Command::new(exe);
+    command.arg("train").arg(&config).arg("--quiet");
+    if arm.until_walks {
+        command.arg("--until-walks");
+    }
+    let child = command
         .stdin(Stdio::null())
         .stdout(log.try_clone()?)
         .stderr(log)
@@ -369,41 +407,87 @@ fn start_arm(exe: &Path, dir: &Path, arm: &Arm, index: usize) -> anyhow::Result<
         arm: index,
         child,
         started: Instant::now(),
+        earlier_wall: read_wall_seconds(arm),
     })
 }
 
 /// Adds one attempt's training seconds to the arm's `wall_seconds` file; returns the total over
 /// every attempt (an interrupted arm's earlier attempts count).
 fn add_wall_seconds(arm: &Arm, seconds: f64) -> anyhow::Result<f64> {
-    let path = arm.data_dir().join("wall_seconds");
-    let earlier: f64 = std::fs::read_to_string(&path)
-        .ok()
-        .and_then(|t| t.trim().parse().ok())
-        .unwrap_or(0.0);
-    let total = earlier + seconds;
-    std::fs::write(&path, format!("{total}\n"))?;
+    let total = read_wall_seconds(arm) + seconds;
+    std::fs::write(arm.data_dir().join("wall_seconds"), format!("{total}\n"))?;
     Ok(total)
 }
 
-/// After the training process exits: checks it reached every iteration, evaluates the final
-/// policy (and, for a transfer arm, the pretrained one zero-shot) and writes `done.json`.
+/// The arm's training seconds so far (0 before its first attempt ends).
+fn read_wall_seconds(arm: &Arm) -> f64 {
+    std::fs::read_to_string(arm.data_dir().join("wall_seconds"))
+        .ok()
+        .and_then(|t| t.trim().parse().ok())
+        .unwrap_or(0.0)
+}
+
+/// `<run_dir>/walk.json` says the criterion held.
+fn walked_already(arm: &Arm) -> bool {
+    walk_json(arm)["walks"].as_bool() == Some(true)
+}
+
+/// The walking attempt's own clock at its passing check (`walk.json`'s `wall_clock_s`).
+fn walk_clock_seconds(arm: &Arm) -> f64 {
+    walk_json(arm)["wall_clock_s"].as_f64().unwrap_or(0.0)
+}
+
+fn walk_json(arm: &Arm) -> serde_json::Value {
+    std::fs::read_to_string(arm.run_dir().join("walk.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str(&t).ok())
+        .unwrap_or(serde_json::Value::Null)
+}
+
+/// After the training process exits (`status`: its exit, `Err` with the status when it failed):
+/// checks it reached every iteration (an `until_walks` arm: that it walked or reached its cap),
+/// evaluates the final policy (and, for a transfer arm, the pretrained one zero-shot) and writes
+/// `done.json`. `earlier_wall`: the arm's training seconds before this attempt.
 fn finish_arm(
     spec: &ExperimentSpec,
     arms: &[Arm],
     arm: &Arm,
-    status: std::process::ExitStatus,
+    status: Result<(), String>,
     wall: f64,
+    earlier_wall: f64,
 ) -> anyhow::Result<()> {
     let iteration = crate::experiment::last_iteration(&arm.run_dir());
-    if !status.success() {
+    if let Err(status) = status {
         anyhow::bail!("training exited with {status} at iteration {iteration}");
     }
-    if iteration < arm.iterations {
-        anyhow::bail!(
-            "training stopped at iteration {iteration} of {} (interrupted); rerun to resume",
-            arm.iterations
-        );
-    }
+    let walk = if arm.until_walks {
+        match walk_progress(
+            &arm.run_dir(),
+            iteration,
+            arm.iterations,
+            arm.samples_per_iteration(),
+            earlier_wall,
+        ) {
+            WalkProgress::Settled(outcome) => Some(outcome),
+            WalkProgress::Interrupted { iteration } => anyhow::bail!(
+                "training stopped at iteration {iteration} of at most {} without walking \
+                 (interrupted); rerun to resume (its walk checks are kept)",
+                arm.iterations
+            ),
+        }
+    } else {
+        if iteration < arm.iterations {
+            anyhow::bail!(
+                "training stopped at iteration {iteration} of {} (interrupted); rerun to resume",
+                arm.iterations
+            );
+        }
+        None
+    };
+    let zero_shot_walk = match (&walk, &arm.depends_on) {
+        (Some(_), Some(_)) => Some(initial_walk_check(arm)?),
+        _ => None,
+    };
     let ckpt = crate::experiment::final_checkpoint(&arm.run_dir());
     let mut evaluations = BTreeMap::new();
     for robot in &arm.robots {
@@ -430,9 +514,53 @@ fn finish_arm(
         zero_shot,
         by_terrain: BTreeMap::new(),
         zero_shot_by_terrain: BTreeMap::new(),
+        walk,
+        zero_shot_walk,
     };
     fill_terrain_evaluations(spec, arms, arm, &mut done)?;
     write_done(arm, &done)
+}
+
+/// The walk check of the policy a transfer arm starts from: its model at iteration 0 (the
+/// pretrained core and the arm's transfer heads, seeded as the learner seeds them), before any
+/// fine-tuning.
+fn initial_walk_check(arm: &Arm) -> anyhow::Result<WalkOutcome> {
+    let opts = crate::learner_cmd::learner_options(&arm.config, false)?;
+    let device = l3p_policy::cpu_device();
+    device.seed(opts.ppo.seed);
+    let model = l3p_learner::init_model(
+        opts.ppo.mode,
+        opts.policy.clone(),
+        opts.robots.clone(),
+        opts.daemon.init_from.as_deref(),
+        opts.ppo.transfer_heads,
+        &opts.transfer_maps,
+        &device,
+    )?;
+    let robot = arm
+        .robots
+        .first()
+        .ok_or_else(|| anyhow::anyhow!("arm {} has no robot", arm.name))?;
+    let (bytes, _) = l3p_policy::export_bytes(&model, robot)?;
+    let (rows, walks) = crate::train_cmd::walk_check_export(&arm.config, bytes)?;
+    let failures: Vec<String> = rows.iter().flat_map(|r| r.walk_failures.clone()).collect();
+    let gait_only = rows.len() == 2
+        || rows.iter().all(|r| {
+            r.walk_failures
+                .iter()
+                .all(|f| f.starts_with(crate::experiment::HEADING_FAILURE))
+        });
+    Ok(WalkOutcome {
+        walks,
+        gait: gait_only.then_some((0, 0)),
+        iteration: 0,
+        last_check: 0,
+        samples: 0,
+        wall_seconds: None,
+        failures,
+        checks: 1,
+        rows,
+    })
 }
 
 /// Writes `done.json` through a temporary file and a rename, so an interrupted `evaluate` never
@@ -657,6 +785,8 @@ fn collect_results(arms: &[Arm], finished: &[Finished], window: usize) -> Vec<Ar
                     .find(|r| r.forward.is_none())
                     .map(|r| r.summary.episode_return as f64)
             }),
+            walk: done.walk.clone(),
+            zero_shot_walk: done.zero_shot_walk.clone(),
         });
     }
     out
@@ -793,6 +923,21 @@ fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
         spec.experiment.base_config.display(),
         spec.evaluation.episodes,
     );
+    let walk_table = samples_to_walk_table(&results);
+    if !walk_table.is_empty() {
+        md.push_str(&format!(
+            "\n## Samples to walk\n\nEvery arm trained with `--until-walks` (the walk criterion, \
+             checked every 25 iterations and after each promising 5-iteration screen, at 5 ms \
+             physics with joint damping at the top of its range) and stopped when it held, or at \
+             its cap. Per target robot and method: the seeds that walked within the cap; the \
+             median and range of samples to the passing check, an arm that did not walk counting \
+             as its cap (`>`; a median it decides is a lower bound, `≥`); the ratio of medians to \
+             the same robot's from-scratch arms of the family (`l3p` for `l3p-transfer`, `mlp` \
+             for `mlp-transfer`; `≤`/`≥` when one side is a bound); the median iteration; and how \
+             many of the policies the arms started from (iteration 0: pretrained core and the \
+             arm's transfer heads) already walked.\n\n{walk_table}"
+        ));
+    }
     // Curves per target robot: every method's mean over seeds with its min-max band.
     let mut robots: Vec<String> = results.iter().map(|r| r.robot.clone()).collect();
     robots.sort();
@@ -857,7 +1002,7 @@ fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
     md.push_str(&terrains);
     let file = out.join("README.md");
     std::fs::write(&file, &md)?;
-    println!("{table}{bars}{terrains}");
+    println!("{walk_table}{table}{bars}{terrains}");
     println!("wrote {} and the curves beside it", file.display());
     Ok(())
 }

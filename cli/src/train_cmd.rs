@@ -200,6 +200,24 @@ fn walk_check(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<Walk
     check_policy(iteration, export, robot, &policy, walk_env(config, robot)?)
 }
 
+/// The walk criterion's rows for an export (its bytes) on the config's first actor's robot, under
+/// the walk check's conditions, and whether it walks.
+pub fn walk_check_export(
+    config: &Config,
+    export: Vec<u8>,
+) -> anyhow::Result<(Vec<crate::eval_cmd::EvalRow>, bool)> {
+    let robot_name = config
+        .actors
+        .first()
+        .map(|a| a.robot.clone())
+        .ok_or_else(|| anyhow::anyhow!("no [[actors]] in the config"))?;
+    let robot = l3p_robots::catalog::RobotSpec::by_name(&robot_name)?;
+    let policy = l3p_policy::DeployPolicy::from_bytes(&export)?;
+    let check = check_policy(0, export, robot, &policy, walk_env(config, robot)?)?;
+    let walks = check.walks();
+    Ok((check.rows, walks))
+}
+
 /// The walk criterion's rows for `policy` (the harder speed first; the other only if it passes).
 fn check_policy(
     iteration: u64,

@@ -133,6 +133,34 @@ fn variants_add_their_own_arms_and_pretrain_only_when_they_change_the_core() {
         .collect();
     assert!(joint.is_sorted_by_key(|s| *s == Stage::Target), "{joint:?}");
 
+    // by_robot: pretraining first (the variants' own too), then every arm of one robot.
+    let by_robot = plan(
+        &spec(&text.replace("[experiment]\n", "[experiment]\nby_robot = true\n")),
+        &base(),
+    )
+    .unwrap();
+    assert_eq!(by_robot.len(), arms.len());
+    let stages: Vec<Stage> = by_robot.iter().map(|a| a.stage).collect();
+    assert!(
+        stages.is_sorted_by_key(|s| *s == Stage::Target),
+        "{stages:?}"
+    );
+    let robots: Vec<&str> = by_robot
+        .iter()
+        .filter(|a| a.stage == Stage::Target)
+        .map(|a| a.robots[0].as_str())
+        .collect();
+    let mut runs = robots.clone();
+    runs.dedup();
+    let mut distinct = runs.clone();
+    distinct.sort_unstable();
+    distinct.dedup();
+    assert_eq!(
+        runs.len(),
+        distinct.len(),
+        "each robot's arms together: {robots:?}"
+    );
+
     let warm = arms
         .iter()
         .find(|a| a.name == "go1-l3p-transfer-warm-s2")
@@ -347,6 +375,8 @@ fn result(robot: &str, method: Mode, seed: u64, reward_85: Option<u64>, reward: 
         terrain_levels: false,
         terrain_reach: BTreeMap::new(),
         zero_shot_reach: None,
+        walk: None,
+        zero_shot_walk: None,
     }
 }
 
@@ -521,4 +551,164 @@ fn time_to_scratch_counts_iterations_to_the_scratch_final_and_marks_bounds() {
     );
     // No from-scratch arm at all: nothing to measure against.
     assert!(time_to_scratch_table(&results[2..], 1.0).is_empty());
+}
+
+/// A walk check line as `l3p train --until-walks` appends it (one 1.0 m/s row).
+fn check_line(iteration: u64, failures: &[&str]) -> String {
+    serde_json::json!({
+        "iteration": iteration,
+        "rows": [{"forward": 1.0, "walk_failures": failures}],
+    })
+    .to_string()
+}
+
+fn write_run(dir: &Path, walk: serde_json::Value, checks: &[String]) {
+    std::fs::create_dir_all(dir).unwrap();
+    std::fs::write(dir.join("walk.json"), walk.to_string()).unwrap();
+    std::fs::write(dir.join("walk_checks.jsonl"), checks.join("\n") + "\n").unwrap();
+}
+
+#[test]
+fn until_walks_bookkeeping_walked_never_walked_and_interrupted() {
+    let tmp = tempfile::tempdir().unwrap();
+    // Walks at its first check: samples from walk.json, wall-clock over every attempt.
+    let first = tmp.path().join("first");
+    write_run(
+        &first,
+        serde_json::json!({"walks": true, "iteration": 25, "samples": 307_200, "wall_clock_s": 80.0, "rows": []}),
+        &[check_line(25, &[])],
+    );
+    let WalkProgress::Settled(w) = walk_progress(&first, 27, 300, 12_288, 20.0) else {
+        panic!("a walked arm is settled");
+    };
+    assert!(w.walks);
+    assert_eq!(w.gait, Some((25, 25 * 12_288)));
+    assert_eq!((w.iteration, w.samples, w.checks), (25, 307_200, 1));
+    assert_eq!(w.wall_seconds, Some(100.0));
+    // Never walks: at the cap it is settled as "not within the cap", samples a lower bound, the
+    // last check's failures kept.
+    let never = tmp.path().join("never");
+    write_run(
+        &never,
+        serde_json::json!({"walks": false}),
+        &[
+            check_line(25, &["falls"]),
+            check_line(50, &["heading changes 40° per episode (want <= 15°)"]),
+        ],
+    );
+    let WalkProgress::Settled(w) = walk_progress(&never, 60, 60, 1_000, 0.0) else {
+        panic!("an arm at its cap is settled");
+    };
+    assert!(!w.walks);
+    assert_eq!(
+        (w.iteration, w.last_check, w.samples, w.checks),
+        (60, 50, 60_000, 2)
+    );
+    assert!(w.failures[0].contains("heading"), "{:?}", w.failures);
+    assert_eq!(
+        w.gait,
+        Some((50, 50_000)),
+        "its gait held but for the heading at 50"
+    );
+    assert_eq!(w.wall_seconds, None);
+    // Interrupted before the cap (its trainer writes walks: false on the way out): resume, and
+    // the check history stays for the resumed run to append to.
+    let cut = tmp.path().join("cut");
+    write_run(
+        &cut,
+        serde_json::json!({"walks": false}),
+        &[check_line(25, &["falls"])],
+    );
+    assert_eq!(
+        walk_progress(&cut, 31, 300, 1_000, 0.0),
+        WalkProgress::Interrupted { iteration: 31 }
+    );
+    let mut checks = std::fs::read_to_string(cut.join("walk_checks.jsonl")).unwrap();
+    checks.push_str(&(check_line(50, &[]) + "\n"));
+    std::fs::write(cut.join("walk_checks.jsonl"), checks).unwrap();
+    std::fs::write(
+        cut.join("walk.json"),
+        serde_json::json!({"walks": true, "iteration": 50, "samples": 50_000, "wall_clock_s": 30.0}).to_string(),
+    )
+    .unwrap();
+    let WalkProgress::Settled(w) = walk_progress(&cut, 52, 300, 1_000, 45.0) else {
+        panic!("walked after the resume");
+    };
+    assert_eq!(
+        (w.iteration, w.checks),
+        (50, 2),
+        "the check before the interruption is kept"
+    );
+    assert_eq!(w.wall_seconds, Some(75.0));
+}
+
+fn walked(robot: &str, method: Mode, seed: u64, samples: Option<u64>) -> ArmResult {
+    let mut r = result(robot, method, seed, None, 1.0);
+    r.walk = Some(WalkOutcome {
+        walks: samples.is_some(),
+        iteration: samples.map_or(300, |s| s / 1_000),
+        last_check: 0,
+        samples: samples.unwrap_or(300_000),
+        wall_seconds: None,
+        failures: Vec::new(),
+        checks: 1,
+        gait: samples.map(|s| (s / 2_000, s / 2)),
+        rows: Vec::new(),
+    });
+    r
+}
+
+#[test]
+fn samples_to_walk_medians_ratios_and_bounds() {
+    assert_eq!(
+        censored_median(&[(3.0, false), (1.0, false), (2.0, true)]),
+        Some(CensoredMedian {
+            value: 2.0,
+            at_least: true
+        })
+    );
+    assert_eq!(
+        censored_median(&[(3.0, true), (1.0, false), (2.0, false)]),
+        Some(CensoredMedian {
+            value: 2.0,
+            at_least: false
+        })
+    );
+    let results = vec![
+        walked("go1", Mode::L3p, 1, Some(200_000)),
+        walked("go1", Mode::L3p, 2, Some(180_000)),
+        walked("go1", Mode::L3p, 3, None),
+        walked("go1", Mode::L3pTransfer, 1, Some(20_000)),
+        walked("go1", Mode::L3pTransfer, 2, Some(40_000)),
+        walked("go1", Mode::L3pTransfer, 3, Some(30_000)),
+        walked("spot", Mode::L3p, 1, Some(100_000)),
+        walked("spot", Mode::L3pTransfer, 1, None),
+    ];
+    let t = samples_to_walk_table(&results);
+    let row = |robot: &str, method: &str| -> String {
+        t.lines()
+            .find(|l| l.starts_with(&format!("| {robot} | {method} |")))
+            .unwrap_or_else(|| panic!("no {robot} {method} row in\n{t}"))
+            .to_string()
+    };
+    // Scratch: 2 of 3 walked, the third counts as its cap and decides nothing (median 0.20).
+    let scratch = row("go1", "l3p");
+    assert!(
+        scratch.contains("| 2/3 |") && scratch.contains("| 0.20 |"),
+        "{scratch}"
+    );
+    assert!(scratch.contains("0.18–>0.30"), "{scratch}");
+    // Transfer: 0.03 M against 0.20 M.
+    let transfer = row("go1", "l3p-transfer");
+    assert!(
+        transfer.contains("| 3/3 |") && transfer.contains("| 0.15× |"),
+        "{transfer}"
+    );
+    // A transfer arm that did not walk: its median is a lower bound, and so is the ratio.
+    let spot = row("spot", "l3p-transfer");
+    assert!(
+        spot.contains("| 0/1 |") && spot.contains("≥ 3.00×"),
+        "{spot}"
+    );
+    assert!(samples_to_walk_table(&[result("go1", Mode::L3p, 1, None, 1.0)]).is_empty());
 }
