@@ -327,3 +327,90 @@ fn pid_of(arm_dir: &Path) -> u32 {
         .and_then(|s| s.trim().parse().ok())
         .unwrap_or(0)
 }
+
+/// Samples to walk end to end: an `until_walks` micro-experiment (an A1 core, Go1 from scratch and
+/// with the core under mapped transfer heads) whose arms cannot walk in 2 iterations. Every arm
+/// trains with `--until-walks`, settles at its cap as "did not walk", records samples as a lower
+/// bound and, for the transfer arm, the walk check of the policy it started from; the report opens
+/// with the samples-to-walk table.
+#[test]
+fn an_until_walks_experiment_records_arms_that_do_not_walk_within_the_cap() {
+    let dir = tempfile::tempdir().unwrap();
+    let cwd = dir.path();
+    let base = format!("[run]\nname = \"unused\"\n{TINY_FLAT_TASK}{BASE_REST}");
+    std::fs::write(cwd.join("base.toml"), base).unwrap();
+    let spec = r#"
+[experiment]
+name = "walks"
+base_config = "base.toml"
+data_dir = "data"
+seeds = [1]
+until_walks = true
+by_robot = true
+[pretrain]
+robots = ["a1"]
+methods = ["l3p"]
+iterations = 2
+[targets]
+robots = ["go1"]
+methods = ["l3p"]
+iterations = 2
+[evaluation]
+episodes = 2
+envs = 2
+forward = [0.5]
+[[variants]]
+name = "mapped"
+methods = ["l3p-transfer"]
+transfer_heads = "mapped"
+"#;
+    std::fs::write(cwd.join("walks.toml"), spec).unwrap();
+    let out = l3p(&["experiment", "plan", "walks.toml"], cwd);
+    let plan = text(&out);
+    assert!(out.status.success(), "{plan}");
+    assert!(
+        plan.contains("l3p train data/walks/arms/go1-l3p-s1.toml --quiet --until-walks"),
+        "{plan}"
+    );
+    let out = l3p(&["experiment", "run", "walks.toml"], cwd);
+    assert!(out.status.success(), "{}", text(&out));
+    let exp = cwd.join("data/walks");
+    let done = |arm: &str| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(exp.join(arm).join("done.json")).unwrap())
+            .unwrap()
+    };
+    // 4 envs × 8 steps per iteration; the cap of 2 iterations is a lower bound of 64 samples.
+    for arm in [
+        "pretrain-l3p-s1",
+        "go1-l3p-s1",
+        "go1-l3p-transfer-mapped-s1",
+    ] {
+        let walk = &done(arm)["walk"];
+        assert_eq!(walk["walks"], false, "{arm}: {walk}");
+        assert_eq!(
+            (walk["iteration"].as_u64(), walk["samples"].as_u64()),
+            (Some(2), Some(64)),
+            "{arm}"
+        );
+        assert_eq!(done(arm)["iterations"], 2, "{arm}");
+    }
+    assert!(done("go1-l3p-s1")["zero_shot_walk"].is_null());
+    let zero = &done("go1-l3p-transfer-mapped-s1")["zero_shot_walk"];
+    assert_eq!(zero["walks"], false, "{zero}");
+    assert!(!zero["rows"].as_array().unwrap().is_empty(), "{zero}");
+    assert!(!zero["failures"].as_array().unwrap().is_empty(), "{zero}");
+
+    let out = l3p(&["experiment", "report", "walks.toml"], cwd);
+    let report = text(&out);
+    assert!(out.status.success(), "{report}");
+    assert!(
+        report.contains("| go1 | l3p | 0/1 | ≥ 0.00 | >0.00–>0.00 | 1× |"),
+        "{report}"
+    );
+    assert!(
+        report.contains("| go1 | l3p-transfer [mapped] | 0/1 |"),
+        "{report}"
+    );
+    let readme = std::fs::read_to_string(exp.join("report/README.md")).unwrap();
+    assert!(readme.contains("## Samples to walk"), "{readme}");
+}
