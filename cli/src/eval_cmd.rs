@@ -480,6 +480,14 @@ pub fn format_rows(rows: &[EvalRow]) -> String {
             col(&|r| gait(r, &|g| format!("{:.1}°", g.heading_drift_rad.to_degrees()))),
         ),
         (
+            "  signed mean (+ left)",
+            col(&|r| {
+                gait(r, &|g| {
+                    format!("{:+.1}°", g.heading_change_mean_rad.to_degrees())
+                })
+            }),
+        ),
+        (
             "walk criterion",
             col(&|r| {
                 if r.walk_failures.is_empty() {

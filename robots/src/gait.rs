@@ -210,12 +210,9 @@ impl GaitMeter {
             swing[f] = (self.swing_steps[f] as f64 / n) as f32;
             touchdown_hz[f] = (self.touchdowns[f] as f64 / secs) as f32;
         }
-        let drift = if self.heading_changes.is_empty() {
-            0.0
-        } else {
-            self.heading_changes.iter().map(|d| d.abs()).sum::<f32>()
-                / self.heading_changes.len() as f32
-        };
+        let episodes = self.heading_changes.len().max(1) as f32;
+        let drift = self.heading_changes.iter().map(|d| d.abs()).sum::<f32>() / episodes;
+        let signed = self.heading_changes.iter().sum::<f32>() / episodes;
         GaitReport {
             steps: self.steps,
             base_height_mean: mean_h,
@@ -239,6 +236,7 @@ impl GaitMeter {
             mean_abs_torque: (self.abs_torque_sum / n) as f32,
             mean_power: (self.power_sum / n) as f32,
             heading_drift_rad: drift,
+            heading_change_mean_rad: signed,
             mean_heading_velocity: self.heading_vel_sum.map(|v| (v / n) as f32),
         }
     }
@@ -284,6 +282,11 @@ pub struct GaitReport {
     pub mean_power: f32,
     /// Mean |heading change| over an episode (rad).
     pub heading_drift_rad: f32,
+    /// Mean signed heading change over an episode (rad, + = left): equal in size to
+    /// `heading_drift_rad` when the robot turns one way in every episode (a bias), near 0 when its
+    /// heading wanders both ways. Absent in reports written before it existed.
+    #[serde(default)]
+    pub heading_change_mean_rad: f32,
     /// Mean base velocity in the heading frame, [forward, left] (m/s). Absent in reports written
     /// before it existed.
     #[serde(default)]
@@ -587,6 +590,12 @@ mod tests {
             (r.heading_drift_rad - 3.0).abs() < 1e-3,
             "{}",
             r.heading_drift_rad
+        );
+        // Signed: +5 and −1 rad average to +2 (a bias shows as |signed| = drift).
+        assert!(
+            (r.heading_change_mean_rad - 2.0).abs() < 1e-3,
+            "{}",
+            r.heading_change_mean_rad
         );
     }
 
