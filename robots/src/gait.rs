@@ -673,6 +673,7 @@ mod tests {
             mean_abs_torque: 3.0,
             mean_power: 40.0,
             heading_drift_rad: 0.1,
+            heading_change_mean_rad: 0.1,
             mean_heading_velocity: [0.5, 0.0],
         };
         let t = TrackingSummary {
