@@ -51,6 +51,12 @@ pub struct EvalArgs {
     /// bound asks for walking straight unaided.
     #[arg(long)]
     pub heading_hold: bool,
+    /// Play the policy's left-right mirror image, `M_a π(M_o o)` with the robot's task mirror maps
+    /// (a diagnostic for a drifting robot: in a symmetric simulator the mirror image turns the
+    /// other way by as much, so a heading change that keeps its sign is the simulator's, one that
+    /// flips is the policy's).
+    #[arg(long)]
+    pub mirrored: bool,
     #[command(flatten)]
     pub pins: PhysicsPins,
     /// Play the policy through this action filter instead of its own `io.action_filter_alpha`
@@ -256,6 +262,31 @@ pub fn evaluate_row(
     })
 }
 
+/// `policy`'s left-right mirror image on `robot` (its task mirror under the policy's own
+/// observation layout).
+fn mirror_policy(
+    policy: &DeployPolicy,
+    robot: &l3p_robots::catalog::RobotSpec,
+) -> anyhow::Result<DeployPolicy> {
+    let io = policy.config.io.as_ref();
+    let gait_clock = io.is_some_and(|io| io.gait_clock_hz > 0.0);
+    let height_scan = policy.obs_dim() == l3p_robots::config::obs_dim_of(true, gait_clock);
+    let mirror = l3p_robots::mirror::TaskMirror::new(
+        &robot.model()?,
+        &robot.joint_names,
+        &robot.default_pose,
+        height_scan,
+        gait_clock,
+    )
+    .map_err(|e| anyhow::anyhow!("{}: no mirror image: {e}", robot.name))?;
+    Ok(policy.permuted(
+        &mirror.observation.index,
+        &mirror.observation.sign,
+        &mirror.action.index,
+        &mirror.action.sign,
+    )?)
+}
+
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let mut config = match &args.config {
         Some(path) => Config::load(path)?,
@@ -276,6 +307,11 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     }
     args.pins.apply(&mut config.env)?;
     let robot = l3p_robots::catalog::RobotSpec::by_name(&args.robot)?;
+    let policy = if args.mirrored {
+        mirror_policy(&policy, robot)?
+    } else {
+        policy
+    };
     let speeds: Vec<Option<f32>> = match &args.forward {
         Some(v) if v.iter().any(|x| !x.is_finite()) => {
             anyhow::bail!("--forward takes finite speeds, got {v:?}")
@@ -309,6 +345,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             "robot": robot.name,
             "terrain": args.terrain,
             "heading_hold": args.heading_hold,
+            "mirrored": args.mirrored,
             "pins": {
                 "joint_damping": args.pins.joint_damping,
                 "joint_friction": args.pins.joint_friction,

@@ -285,6 +285,62 @@ impl DeployPolicy {
         out.copy_from_slice(&scratch.a);
     }
 
+    /// The policy seen through signed permutations of its inputs and outputs,
+    /// `π'(o) = M_a π(M_o o)` with `(M o)[i] = sign[i] · o[index[i]]`, folded exactly into the
+    /// first and last layers (the std follows the actions). With a task's left-right mirror maps
+    /// this is the policy's mirror image: played in a symmetric simulator it turns the other way as
+    /// much as the policy itself turns, so a drift that keeps its sign comes from the simulator
+    /// (`l3p eval --mirrored`).
+    pub fn permuted(
+        &self,
+        obs_index: &[usize],
+        obs_sign: &[f32],
+        action_index: &[usize],
+        action_sign: &[f32],
+    ) -> Result<Self, PolicyError> {
+        let (d, a) = (self.config.obs_dim, self.config.action_dim);
+        let is_perm = |index: &[usize], n: usize| {
+            let mut seen = vec![false; n];
+            index.len() == n
+                && index
+                    .iter()
+                    .all(|&i| i < n && !std::mem::replace(&mut seen[i], true))
+        };
+        if !is_perm(obs_index, d) || obs_sign.len() != d {
+            return Err(PolicyError::Shape(format!(
+                "observation map of {} entries is not a permutation of {d}",
+                obs_index.len()
+            )));
+        }
+        if !is_perm(action_index, a) || action_sign.len() != a {
+            return Err(PolicyError::Shape(format!(
+                "action map of {} entries is not a permutation of {a}",
+                action_index.len()
+            )));
+        }
+        let mut out = self.clone();
+        // First layer, w [in, out]: input idx[i] takes the row that input i had, signed.
+        let first = &self.layers[0];
+        let w = &mut out.layers[0].w;
+        for (i, (&j, &s)) in obs_index.iter().zip(obs_sign).enumerate() {
+            let (src, dst) = (i * first.output, j * first.output);
+            for o in 0..first.output {
+                w[dst + o] = s * first.w[src + o];
+            }
+        }
+        // Last layer: output i is output idx[i], signed.
+        let k = out.layers.len() - 1;
+        let last = out.layers[k].clone();
+        for (i, (&j, &s)) in action_index.iter().zip(action_sign).enumerate() {
+            for r in 0..last.input {
+                out.layers[k].w[r * last.output + i] = s * last.w[r * last.output + j];
+            }
+            out.layers[k].b[i] = s * last.b[j];
+            out.std[i] = self.std[j];
+        }
+        Ok(out)
+    }
+
     /// Action means (allocating convenience form of [`act_into`](Self::act_into)).
     pub fn act(&self, obs: &[f32]) -> Result<Vec<f32>, PolicyError> {
         let mut out = Vec::new();
