@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Keep an experiment's results across machines: pack what `l3p experiment report` and a resumed
 # `l3p experiment run` need from finished arms (done.json, the learner's metrics, the arm configs,
-# and the pretraining arms' final checkpoints, which the transfer arms start from) into one tarball,
+# an until_walks arm's walk.json and walk_checks.jsonl, and the pretraining arms' final checkpoints, which the transfer arms start from) into one tarball,
 # or unpack it back. Unfinished arms are left out: a resumed run starts them again.
 #
 #   experiments/archive.sh pack   l3p-data/experiments/laptop docs/experiments/<date>-laptop/arms.tar.gz
@@ -21,6 +21,10 @@ case "$mode" in
         arm=${done%/done.json}
         echo "$done"
         echo "$arm/$arm/metrics.jsonl"
+        # until_walks arms: the check history and the verdict (small), beside done.json's summary.
+        for f in walk.json walk_checks.jsonl; do
+          [ -f "$arm/$arm/$f" ] && echo "$arm/$arm/$f"
+        done
         if [ "${ARCHIVE_CHECKPOINTS:-1}" != 0 ]; then
           case "$arm" in pretrain-*) echo "$arm/$arm/checkpoints/latest.ckpt" ;; esac
         fi
