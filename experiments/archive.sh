@@ -23,7 +23,7 @@ case "$mode" in
         echo "$arm/$arm/metrics.jsonl"
         # until_walks arms: the check history and the verdict (small), beside done.json's summary.
         for f in walk.json walk_checks.jsonl; do
-          [ -f "$arm/$arm/$f" ] && echo "$arm/$arm/$f"
+          if [ -f "$arm/$arm/$f" ]; then echo "$arm/$arm/$f"; fi
         done
         if [ "${ARCHIVE_CHECKPOINTS:-1}" != 0 ]; then
           case "$arm" in pretrain-*) echo "$arm/$arm/checkpoints/latest.ckpt" ;; esac
