@@ -13,7 +13,12 @@
 //! triggers make versions, blobs, lineage and alias history append-only. `PRAGMA synchronous=FULL`:
 //! a committed put survives power loss, not only a process crash.
 //!
-//! Main types: [`Registry`], [`IntegrityReport`]; what it takes and returns ([`PutRequest`],
+//! Retention: [`Registry::gc`] is the one way versions leave — old checkpoint versions under a
+//! [`RetentionPolicy`], in one transaction that lifts the deletion triggers only inside itself.
+//! Numbers are never reused (the newest version of a name is always kept), so a removed version's
+//! number leaves a gap that resolves as not found.
+//!
+//! Main types: [`Registry`], [`IntegrityReport`], [`RetentionPolicy`] and [`GcReport`]; what it takes and returns ([`PutRequest`],
 //! [`PutOutcome`], [`ListFilter`], [`TagOutcome`], [`CoreCheck`]) is shared with the client, in
 //! `l3p-registry-client`.
 
