@@ -1,7 +1,8 @@
-//! `l3p registry serve|list|show|pull|put|tag|history|lineage`: the artifact registry from the
-//! command line. `serve` runs the Zenoh service on a local database; the other commands talk to a
-//! running service through Zenoh (`--connect`, default `tcp/127.0.0.1:7447`, or `--config` for a
-//! config's `[zenoh]` with its TLS), or, with `--data <dir>`,
+//! `l3p registry serve|list|show|pull|put|tag|history|lineage|gc`: the artifact registry from the
+//! command line. `serve` runs the Zenoh service on a local database; `gc` removes old checkpoint
+//! versions from one (always the database itself, never through a service); the other commands talk
+//! to a running service through Zenoh (`--connect`, default `tcp/127.0.0.1:7447`, or `--config` for
+//! a config's `[zenoh]` with its TLS), or, with `--data <dir>`,
 //! open `<dir>/registry.db` directly without any service (SQLite locking keeps that safe next to a
 //! running service).
 
@@ -12,8 +13,8 @@ use anyhow::Context;
 use clap::{Args, Subcommand};
 use l3p_net::{ZenohSettings, open_session};
 use l3p_registry::{
-    ArtifactKind, ArtifactMeta, LineageRole, ListFilter, PutRequest, Registry, RegistryAccess,
-    RegistryClient,
+    ArtifactKind, ArtifactMeta, DEFAULT_KEEP_LAST, GcReport, KeepReason, LineageRole, ListFilter,
+    PutRequest, Registry, RegistryAccess, RegistryClient, RetentionPolicy,
 };
 
 use crate::runtime::NetArgs;
@@ -137,6 +138,22 @@ pub enum RegistryCommand {
         json: bool,
         #[command(flatten)]
         target: Target,
+    },
+    /// Remove old checkpoint versions: keep the newest --keep of each checkpoint, every aliased
+    /// version, every lineage parent of a kept version and every version of other kinds.
+    Gc {
+        /// Data directory holding registry.db (opened directly; safe next to a running service).
+        #[arg(long, visible_alias = "data-dir", default_value = "l3p-data")]
+        data: PathBuf,
+        /// Newest versions kept of each checkpoint artifact (at least 1).
+        #[arg(long, default_value_t = DEFAULT_KEEP_LAST, value_parser = clap::value_parser!(u64).range(1..))]
+        keep: u64,
+        /// Print what would be removed and change nothing.
+        #[arg(long)]
+        dry_run: bool,
+        /// Print the JSON report instead of text.
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -347,6 +364,76 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             }
             Ok(())
         }
+        // Local and synchronous: the database itself, no Zenoh.
+        RegistryCommand::Gc {
+            data,
+            keep,
+            dry_run,
+            json,
+        } => gc(&data, keep, dry_run, json),
+    }
+}
+
+fn gc(data: &Path, keep: u64, dry_run: bool, json: bool) -> anyhow::Result<()> {
+    let registry = Registry::open_existing(data)?;
+    let report = registry.gc(&RetentionPolicy { keep_last: keep }, dry_run)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print_gc(registry.path(), &report);
+    }
+    Ok(())
+}
+
+fn print_gc(path: &Path, r: &GcReport) {
+    let verb = if r.dry_run { "would remove" } else { "removed" };
+    println!(
+        "registry gc of {}{}: keep the newest {} versions of each checkpoint",
+        path.display(),
+        if r.dry_run { " (dry run)" } else { "" },
+        r.keep_last
+    );
+    println!(
+        "{:<24} {:<10} {:>6} {:>8}  REMOVED VERSIONS",
+        "NAME", "KIND", "KEPT", "REMOVED"
+    );
+    for a in &r.artifacts {
+        let removed: Vec<String> = a.removed.iter().map(u64::to_string).collect();
+        println!(
+            "{:<24} {:<10} {:>6} {:>8}  {}",
+            a.name,
+            a.kind,
+            a.kept.len(),
+            a.removed.len(),
+            if removed.is_empty() {
+                "-".to_string()
+            } else {
+                removed.join(",")
+            }
+        );
+    }
+    if !r.kept_because.is_empty() {
+        println!("kept beyond the newest {}:", r.keep_last);
+        for k in &r.kept_because {
+            match &k.reason {
+                KeepReason::Alias { alias } => println!("  {:<24} alias {alias}", k.reference),
+                KeepReason::Lineage { child, role } => {
+                    println!("  {:<24} lineage: {child} --{role}--> it", k.reference)
+                }
+            }
+        }
+    }
+    println!(
+        "{verb} {} versions, {} lineage rows, {} blobs ({} bytes of blobs)",
+        r.versions_removed, r.lineage_removed, r.blobs_removed, r.blob_bytes_removed
+    );
+    if r.dry_run {
+        println!("database file: {} bytes (unchanged)", r.file_bytes_before);
+    } else {
+        println!(
+            "database file: {} -> {} bytes",
+            r.file_bytes_before, r.file_bytes_after
+        );
     }
 }
 

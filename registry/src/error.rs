@@ -17,6 +17,10 @@ pub enum StoreError {
         #[source]
         source: rusqlite::Error,
     },
+    #[error(
+        "no registry database at {path}\nhint: pass --data-dir with the directory that holds registry.db"
+    )]
+    Missing { path: PathBuf },
     #[error("cannot create registry directory {path}: {source}")]
     Dir {
         path: PathBuf,
@@ -51,6 +55,7 @@ impl StoreError {
         match self {
             Self::Registry(e) => e.code(),
             Self::Open { .. }
+            | Self::Missing { .. }
             | Self::Dir { .. }
             | Self::SchemaTooNew { .. }
             | Self::Sqlite { .. }

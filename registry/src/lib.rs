@@ -5,7 +5,8 @@
 //! - [`Registry`] (module `store`): the store. Immutable numbered versions per name, content-addressed
 //!   blobs (sha256, checked on write and on read), aliases (`latest` moved on every put, user aliases
 //!   such as `prod`) with their full history, and lineage (which core an adapter was trained against,
-//!   which core a transfer run froze, which checkpoint a version came from).
+//!   which core a transfer run froze, which checkpoint a version came from); [`Registry::gc`] removes
+//!   old checkpoint versions under a [`RetentionPolicy`].
 //! - [`StoreError`] (module `error`): the database's own failures around a [`RegistryError`].
 //! - [`RegistryAccess`] (module `access`): the same API over the store or a service, for tools that
 //!   work either way.
@@ -32,4 +33,7 @@ pub use l3p_registry_client::{
     sha256_hex,
 };
 pub use service::{ServiceLimits, serve, serve_with};
-pub use store::{DB_FILE, IntegrityReport, MAX_BLOB_BYTES, Registry};
+pub use store::{
+    DB_FILE, DEFAULT_KEEP_LAST, GcArtifact, GcReport, IntegrityReport, KeepReason, KeptVersion,
+    MAX_BLOB_BYTES, Registry, RetentionPolicy,
+};

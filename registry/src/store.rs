@@ -13,7 +13,12 @@
 //! triggers make versions, blobs, lineage and alias history append-only. `PRAGMA synchronous=FULL`:
 //! a committed put survives power loss, not only a process crash.
 //!
-//! Main types: [`Registry`], [`IntegrityReport`]; what it takes and returns ([`PutRequest`],
+//! Retention: [`Registry::gc`] is the one way versions leave — old checkpoint versions under a
+//! [`RetentionPolicy`], in one transaction that lifts the deletion triggers only inside itself.
+//! Numbers are never reused (the newest version of a name is always kept), so a removed version's
+//! number leaves a gap that resolves as not found.
+//!
+//! Main types: [`Registry`], [`IntegrityReport`], [`RetentionPolicy`] and [`GcReport`]; what it takes and returns ([`PutRequest`],
 //! [`PutOutcome`], [`ListFilter`], [`TagOutcome`], [`CoreCheck`]) is shared with the client, in
 //! `l3p-registry-client`.
 
@@ -101,19 +106,100 @@ CREATE TABLE IF NOT EXISTS alias_history (
 CREATE INDEX IF NOT EXISTS alias_history_by_name ON alias_history(name, alias);
 CREATE TRIGGER IF NOT EXISTS versions_immutable BEFORE UPDATE ON versions
     BEGIN SELECT RAISE(ABORT, 'artifact versions are immutable'); END;
-CREATE TRIGGER IF NOT EXISTS versions_permanent BEFORE DELETE ON versions
-    BEGIN SELECT RAISE(ABORT, 'artifact versions are immutable'); END;
 CREATE TRIGGER IF NOT EXISTS blobs_immutable BEFORE UPDATE ON blobs
     BEGIN SELECT RAISE(ABORT, 'blobs are immutable'); END;
 CREATE TRIGGER IF NOT EXISTS lineage_immutable BEFORE UPDATE ON lineage
-    BEGIN SELECT RAISE(ABORT, 'lineage is immutable'); END;
-CREATE TRIGGER IF NOT EXISTS lineage_permanent BEFORE DELETE ON lineage
     BEGIN SELECT RAISE(ABORT, 'lineage is immutable'); END;
 CREATE TRIGGER IF NOT EXISTS alias_history_immutable BEFORE UPDATE ON alias_history
     BEGIN SELECT RAISE(ABORT, 'alias history is append-only'); END;
 CREATE TRIGGER IF NOT EXISTS alias_history_permanent BEFORE DELETE ON alias_history
     BEGIN SELECT RAISE(ABORT, 'alias history is append-only'); END;
 "#;
+
+/// The triggers that refuse deletions of versions and lineage rows, kept apart from [`SCHEMA`]
+/// because [`Registry::gc`] drops and re-creates them inside its transaction (the reason is on
+/// `gc`). Part of schema version 1: [`Registry::open`] creates them with the rest.
+const PERMANENT_TRIGGERS: &str = r#"
+CREATE TRIGGER IF NOT EXISTS versions_permanent BEFORE DELETE ON versions
+    BEGIN SELECT RAISE(ABORT, 'artifact versions are immutable'); END;
+CREATE TRIGGER IF NOT EXISTS lineage_permanent BEFORE DELETE ON lineage
+    BEGIN SELECT RAISE(ABORT, 'lineage is immutable'); END;
+"#;
+
+/// Newest versions of each checkpoint artifact that [`RetentionPolicy::default`] keeps.
+pub const DEFAULT_KEEP_LAST: u64 = 5;
+
+/// What [`Registry::gc`] keeps. Beyond the newest [`keep_last`](Self::keep_last) versions of every
+/// checkpoint artifact, gc always keeps every version an alias points at (`latest` included), every
+/// version of the other kinds (cores, adapters, MLPs, deploy policies and robots are few, small next to
+/// checkpoints, and what deployments and transfer runs name by number), and, transitively, every
+/// lineage parent of a kept version.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RetentionPolicy {
+    /// Newest versions kept of each checkpoint artifact; at least 1, so the newest version (and with
+    /// it the numbering of the next put) always survives.
+    pub keep_last: u64,
+}
+
+impl Default for RetentionPolicy {
+    fn default() -> Self {
+        Self {
+            keep_last: DEFAULT_KEEP_LAST,
+        }
+    }
+}
+
+/// Why [`Registry::gc`] kept a checkpoint version older than the newest `keep_last`.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum KeepReason {
+    /// An alias points at it.
+    Alias { alias: String },
+    /// A kept version names it in its lineage.
+    Lineage { child: String, role: LineageRole },
+}
+
+/// A version [`Registry::gc`] kept only because of a [`KeepReason`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct KeptVersion {
+    /// `name@version`.
+    pub reference: String,
+    pub reason: KeepReason,
+}
+
+/// One artifact name's share of a [`GcReport`].
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct GcArtifact {
+    pub name: String,
+    pub kind: ArtifactKind,
+    /// Version numbers that stay, ascending.
+    pub kept: Vec<u64>,
+    /// Version numbers removed (or, in a dry run, that would be), ascending.
+    pub removed: Vec<u64>,
+}
+
+/// What [`Registry::gc`] removed, or in a dry run would remove, and what kept the rest alive.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+pub struct GcReport {
+    pub dry_run: bool,
+    pub keep_last: u64,
+    /// Every artifact name, ordered by name.
+    pub artifacts: Vec<GcArtifact>,
+    /// Checkpoint versions older than the newest `keep_last` that an alias or lineage kept.
+    pub kept_because: Vec<KeptVersion>,
+    pub versions_removed: usize,
+    /// Lineage rows of removed versions (a removed version is never a kept version's parent).
+    pub lineage_removed: usize,
+    /// Blobs no remaining version references.
+    pub blobs_removed: usize,
+    /// Sum of the removed blobs' sizes.
+    pub blob_bytes_removed: u64,
+    /// Size of the database file and its WAL before gc.
+    pub file_bytes_before: u64,
+    /// Size of the database file and its WAL after gc and `VACUUM` (equal to `file_bytes_before` in
+    /// a dry run).
+    pub file_bytes_after: u64,
+}
 
 /// Result of [`Registry::check_integrity`].
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -142,6 +228,7 @@ struct StoredMeta {
 }
 
 type BeforeCommitHook = Box<dyn Fn(&ArtifactMeta) + Send + Sync>;
+type BeforeGcCommitHook = Box<dyn Fn(&GcReport) + Send + Sync>;
 
 /// The artifact store. Cheap to share behind an `Arc`: one connection, serialised by a mutex;
 /// other processes open their own and SQLite's locking keeps them consistent.
@@ -149,6 +236,7 @@ pub struct Registry {
     conn: Mutex<Connection>,
     path: PathBuf,
     before_commit: Option<BeforeCommitHook>,
+    before_gc_commit: Option<BeforeGcCommitHook>,
 }
 
 impl std::fmt::Debug for Registry {
@@ -173,14 +261,26 @@ impl Registry {
             path: dir.to_path_buf(),
             source,
         })?;
+        Self::open_with(dir, OpenFlags::SQLITE_OPEN_CREATE)
+    }
+
+    /// Open the registry in `dir`, refusing to create one: for maintenance (`l3p registry gc`),
+    /// where a mistyped directory must be an error, not a new empty database.
+    pub fn open_existing(dir: &Path) -> Result<Self, StoreError> {
+        let path = dir.join(DB_FILE);
+        if !path.is_file() {
+            return Err(StoreError::Missing { path });
+        }
+        Self::open_with(dir, OpenFlags::empty())
+    }
+
+    fn open_with(dir: &Path, create: OpenFlags) -> Result<Self, StoreError> {
         let path = dir.join(DB_FILE);
         let open_err = |source| StoreError::Open {
             path: path.clone(),
             source,
         };
-        let flags = OpenFlags::SQLITE_OPEN_READ_WRITE
-            | OpenFlags::SQLITE_OPEN_CREATE
-            | OpenFlags::SQLITE_OPEN_NO_MUTEX;
+        let flags = OpenFlags::SQLITE_OPEN_READ_WRITE | create | OpenFlags::SQLITE_OPEN_NO_MUTEX;
         let mut conn = Connection::open_with_flags(&path, flags).map_err(open_err)?;
         conn.busy_timeout(BUSY_TIMEOUT).map_err(open_err)?;
         let mode: String = conn
@@ -208,6 +308,7 @@ impl Registry {
         }
         if found < SCHEMA_VERSION {
             tx.execute_batch(SCHEMA).map_err(open_err)?;
+            tx.execute_batch(PERMANENT_TRIGGERS).map_err(open_err)?;
             tx.pragma_update(None, "user_version", SCHEMA_VERSION)
                 .map_err(open_err)?;
         }
@@ -217,6 +318,7 @@ impl Registry {
             conn: Mutex::new(conn),
             path,
             before_commit: None,
+            before_gc_commit: None,
         })
     }
 
@@ -230,6 +332,12 @@ impl Registry {
     #[doc(hidden)]
     pub fn set_before_commit_hook(&mut self, hook: impl Fn(&ArtifactMeta) + Send + Sync + 'static) {
         self.before_commit = Some(Box::new(hook));
+    }
+
+    /// Test seam: called inside the gc transaction, after every deletion and before commit.
+    #[doc(hidden)]
+    pub fn set_before_gc_commit_hook(&mut self, hook: impl Fn(&GcReport) + Send + Sync + 'static) {
+        self.before_gc_commit = Some(Box::new(hook));
     }
 
     fn lock(&self) -> MutexGuard<'_, Connection> {
@@ -548,6 +656,124 @@ impl Registry {
         Ok(check_core(adapter, core, allow_mismatch)?)
     }
 
+    /// Remove what `policy` does not keep (see [`RetentionPolicy`]): the versions, their lineage rows
+    /// and the blobs no remaining version references; then `VACUUM` to give the space back to the
+    /// file system. With `dry_run`, only report what would go.
+    ///
+    /// One transaction: a crash or an error before the commit leaves the database as it was. The
+    /// deletion triggers (`versions_permanent`, `lineage_permanent`) are dropped and re-created
+    /// inside that transaction. SQLite's DDL is transactional, so no other connection ever sees the
+    /// database without them, and a rollback (crash, error, the test hook panicking) restores them
+    /// with everything else. A guarded trigger (`WHEN NOT EXISTS (SELECT 1 FROM gc_permit)`) would
+    /// need a permit any writer could also insert — triggers of the main schema cannot read a
+    /// connection's private TEMP tables — and a schema migration for existing databases.
+    pub fn gc(&self, policy: &RetentionPolicy, dry_run: bool) -> Result<GcReport, StoreError> {
+        if policy.keep_last == 0 {
+            return Err(RegistryError::Invalid(
+                "gc must keep at least the newest version of each checkpoint (keep_last >= 1)"
+                    .into(),
+            )
+            .into());
+        }
+        let file_bytes_before = self.file_bytes();
+        let mut conn = self.lock();
+        let tx = if dry_run {
+            conn.transaction()
+                .map_err(sql("starting a read transaction"))?
+        } else {
+            conn.transaction_with_behavior(TransactionBehavior::Immediate)
+                .map_err(sql("starting a write transaction"))?
+        };
+        let plan = plan_gc(&tx, policy.keep_last)?;
+        let mut report = GcReport {
+            dry_run,
+            keep_last: policy.keep_last,
+            artifacts: plan.artifacts,
+            kept_because: plan.kept_because,
+            versions_removed: plan.removed.len(),
+            lineage_removed: plan.lineage_removed,
+            blobs_removed: plan.blobs.len(),
+            blob_bytes_removed: plan.blob_bytes,
+            file_bytes_before,
+            file_bytes_after: file_bytes_before,
+        };
+        if dry_run || (plan.removed.is_empty() && plan.blobs.is_empty()) {
+            tx.finish().map_err(sql("ending the gc transaction"))?;
+            return Ok(report);
+        }
+
+        tx.execute_batch(
+            "DROP TRIGGER IF EXISTS versions_permanent; DROP TRIGGER IF EXISTS lineage_permanent;",
+        )
+        .map_err(sql("lifting the deletion triggers"))?;
+        let mut lineage_removed = 0;
+        {
+            let mut drop_lineage = tx
+                .prepare("DELETE FROM lineage WHERE name = ?1 AND version = ?2")
+                .map_err(sql("removing lineage"))?;
+            let mut drop_version = tx
+                .prepare("DELETE FROM versions WHERE name = ?1 AND version = ?2")
+                .map_err(sql("removing versions"))?;
+            for (name, version) in &plan.removed {
+                lineage_removed += drop_lineage
+                    .execute(params![name, *version as i64])
+                    .map_err(sql("removing lineage"))?;
+                // `foreign_keys` is on: deleting a version some remaining lineage row names as its
+                // parent fails here, so lineage can never be left dangling.
+                drop_version
+                    .execute(params![name, *version as i64])
+                    .map_err(sql("removing versions"))?;
+            }
+        }
+        let blobs_removed = tx
+            .execute(
+                "DELETE FROM blobs WHERE NOT EXISTS (SELECT 1 FROM versions WHERE versions.sha256 = blobs.sha256)",
+                [],
+            )
+            .map_err(sql("removing blobs"))?;
+        tx.execute_batch(PERMANENT_TRIGGERS)
+            .map_err(sql("restoring the deletion triggers"))?;
+        if lineage_removed != report.lineage_removed || blobs_removed != report.blobs_removed {
+            // The plan was made in this transaction, so this would be a bug: keep the database as
+            // it was rather than report something else than what was done.
+            return Err(corrupt(
+                "gc plan",
+                format!(
+                    "planned {} lineage rows and {} blobs, removed {lineage_removed} and {blobs_removed}",
+                    report.lineage_removed, report.blobs_removed
+                ),
+            ));
+        }
+        if let Some(hook) = &self.before_gc_commit {
+            hook(&report);
+        }
+        tx.commit().map_err(sql("committing the gc"))?;
+        tracing::info!(
+            versions = report.versions_removed,
+            blobs = report.blobs_removed,
+            bytes = report.blob_bytes_removed,
+            "gc removed old checkpoint versions"
+        );
+        // Give the freed pages back to the file system. In WAL mode VACUUM writes the new file into
+        // the WAL; the TRUNCATE checkpoint copies it back, shrinks the database file and empties the
+        // WAL. Both are after the commit: if either fails (another process holds the database),
+        // the gc stands and the space is reused by later puts.
+        if let Err(e) = conn.execute_batch("VACUUM; PRAGMA wal_checkpoint(TRUNCATE);") {
+            tracing::warn!(path = %self.path.display(), error = %e, "gc committed, but VACUUM failed; the file keeps its size");
+        }
+        drop(conn);
+        report.file_bytes_after = self.file_bytes();
+        Ok(report)
+    }
+
+    /// Bytes of the database file plus its WAL.
+    fn file_bytes(&self) -> u64 {
+        let len = |path: &Path| std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
+        let mut wal = self.path.clone().into_os_string();
+        wal.push("-wal");
+        len(&self.path) + len(Path::new(&wal))
+    }
+
     /// `PRAGMA integrity_check` plus a re-hash of every blob.
     pub fn check_integrity(&self) -> Result<IntegrityReport, StoreError> {
         let conn = self.lock();
@@ -578,6 +804,175 @@ impl Registry {
             bad_blobs,
         })
     }
+}
+
+/// What [`Registry::gc`] will remove, decided from one consistent read of the database.
+struct GcPlan {
+    artifacts: Vec<GcArtifact>,
+    kept_because: Vec<KeptVersion>,
+    /// `(name, version)` of every version to remove.
+    removed: Vec<(String, u64)>,
+    lineage_removed: usize,
+    /// sha256 of every blob no kept version references.
+    blobs: Vec<String>,
+    blob_bytes: u64,
+}
+
+fn plan_gc(conn: &Connection, keep_last: u64) -> Result<GcPlan, StoreError> {
+    type Key = (String, u64);
+    // Every version, newest first within a name.
+    let mut stmt = conn
+        .prepare("SELECT name, version, kind, sha256 FROM versions ORDER BY name, version DESC")
+        .map_err(sql("planning gc"))?;
+    let versions = stmt
+        .query_map([], |row| {
+            Ok((
+                row.get::<_, String>(0)?,
+                row.get::<_, i64>(1)? as u64,
+                row.get::<_, String>(2)?,
+                row.get::<_, String>(3)?,
+            ))
+        })
+        .map_err(sql("planning gc"))?
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(sql("planning gc"))?;
+    let versions = versions
+        .into_iter()
+        .map(|(name, version, kind, sha256)| {
+            let kind: ArtifactKind = kind
+                .parse()
+                .map_err(|e| corrupt(&format!("kind of {name}@{version}"), e))?;
+            Ok((name, version, kind, sha256))
+        })
+        .collect::<Result<Vec<_>, StoreError>>()?;
+    let mut kept: BTreeSet<Key> = BTreeSet::new();
+    let mut seen_of_name: BTreeMap<&str, u64> = BTreeMap::new();
+    for (name, version, kind, _) in &versions {
+        let seen = seen_of_name.entry(name).or_insert(0);
+        *seen += 1;
+        if *kind != ArtifactKind::Checkpoint || *seen <= keep_last {
+            kept.insert((name.clone(), *version));
+        }
+    }
+
+    let mut kept_because = Vec::new();
+    let mut stmt = conn
+        .prepare("SELECT name, alias, version FROM aliases ORDER BY name, alias")
+        .map_err(sql("planning gc"))?;
+    let aliases = stmt
+        .query_map([], |row| {
+            Ok((
+                row.get::<_, String>(0)?,
+                row.get::<_, String>(1)?,
+                row.get::<_, i64>(2)? as u64,
+            ))
+        })
+        .map_err(sql("planning gc"))?
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(sql("planning gc"))?;
+    for (name, alias, version) in aliases {
+        if kept.insert((name.clone(), version)) {
+            kept_because.push(KeptVersion {
+                reference: format!("{name}@{version}"),
+                reason: KeepReason::Alias { alias },
+            });
+        }
+    }
+
+    // Lineage parents of kept versions, transitively (breadth-first from every kept version).
+    let mut stmt = conn
+        .prepare(
+            "SELECT name, version, role, parent_name, parent_version FROM lineage ORDER BY rowid",
+        )
+        .map_err(sql("planning gc"))?;
+    let edges = stmt
+        .query_map([], |row| {
+            Ok((
+                row.get::<_, String>(0)?,
+                row.get::<_, i64>(1)? as u64,
+                row.get::<_, String>(2)?,
+                row.get::<_, String>(3)?,
+                row.get::<_, i64>(4)? as u64,
+            ))
+        })
+        .map_err(sql("planning gc"))?
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(sql("planning gc"))?;
+    let mut parents: BTreeMap<Key, Vec<(LineageRole, Key)>> = BTreeMap::new();
+    let mut lineage_rows: BTreeMap<Key, usize> = BTreeMap::new();
+    for (name, version, role, parent, parent_version) in edges {
+        let role: LineageRole = role.parse().map_err(|e| corrupt("lineage role", e))?;
+        *lineage_rows.entry((name.clone(), version)).or_default() += 1;
+        parents
+            .entry((name, version))
+            .or_default()
+            .push((role, (parent, parent_version)));
+    }
+    let mut queue: VecDeque<Key> = kept.iter().cloned().collect();
+    while let Some(child) = queue.pop_front() {
+        for (role, parent) in parents.get(&child).into_iter().flatten() {
+            if kept.insert(parent.clone()) {
+                kept_because.push(KeptVersion {
+                    reference: format!("{}@{}", parent.0, parent.1),
+                    reason: KeepReason::Lineage {
+                        child: format!("{}@{}", child.0, child.1),
+                        role: *role,
+                    },
+                });
+                queue.push_back(parent.clone());
+            }
+        }
+    }
+
+    let mut artifacts: BTreeMap<String, GcArtifact> = BTreeMap::new();
+    let mut removed = Vec::new();
+    let mut kept_blobs = BTreeSet::new();
+    for (name, version, kind, sha256) in versions.into_iter().rev() {
+        let entry = artifacts.entry(name.clone()).or_insert_with(|| GcArtifact {
+            name: name.clone(),
+            kind,
+            kept: Vec::new(),
+            removed: Vec::new(),
+        });
+        let key = (name, version);
+        if kept.contains(&key) {
+            entry.kept.push(version);
+            kept_blobs.insert(sha256);
+        } else {
+            entry.removed.push(version);
+            removed.push(key);
+        }
+    }
+    let lineage_removed = removed
+        .iter()
+        .map(|key| lineage_rows.get(key).copied().unwrap_or(0))
+        .sum();
+
+    let mut stmt = conn
+        .prepare("SELECT sha256, size FROM blobs ORDER BY sha256")
+        .map_err(sql("planning gc"))?;
+    let all_blobs = stmt
+        .query_map([], |row| {
+            Ok((row.get::<_, String>(0)?, row.get::<_, i64>(1)? as u64))
+        })
+        .map_err(sql("planning gc"))?
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(sql("planning gc"))?;
+    let (mut blobs, mut blob_bytes) = (Vec::new(), 0);
+    for (sha256, size) in all_blobs {
+        if !kept_blobs.contains(&sha256) {
+            blobs.push(sha256);
+            blob_bytes += size;
+        }
+    }
+    Ok(GcPlan {
+        artifacts: artifacts.into_values().collect(),
+        kept_because,
+        removed,
+        lineage_removed,
+        blobs,
+        blob_bytes,
+    })
 }
 
 /// Validate what a writer sent; returns the parsed lineage references.
@@ -659,9 +1054,25 @@ fn resolve(conn: &Connection, reference: &ArtifactRef) -> Result<u64, StoreError
                     latest: latest as u64,
                 }
                 .into()),
-                Some(_) => {
-                    // Versions are contiguous from 1 (never deleted), so any number up to the latest exists.
-                    Ok(*version)
+                Some(latest) => {
+                    // `gc` leaves gaps below the latest version.
+                    let exists: Option<i64> = conn
+                        .query_row(
+                            "SELECT 1 FROM versions WHERE name = ?1 AND version = ?2",
+                            params![name, *version as i64],
+                            |row| row.get(0),
+                        )
+                        .optional()
+                        .map_err(sql("resolving a version"))?;
+                    match exists {
+                        Some(_) => Ok(*version),
+                        None => Err(RegistryError::UnknownVersion {
+                            name: name.to_string(),
+                            version: *version,
+                            latest: latest as u64,
+                        }
+                        .into()),
+                    }
                 }
             }
         }

@@ -1,6 +1,6 @@
-//! Real processes against one database: concurrent writers never lose or duplicate a version, and a
+//! Real processes against one database: concurrent writers never lose or duplicate a version, a
 //! writer killed with SIGKILL in the middle of a put leaves a valid database without the partial
-//! version.
+//! version, and a gc killed before its commit leaves every version in place.
 //!
 //! The child processes are this test binary run again with `L3P_REGISTRY_CHILD` set: it then runs
 //! only the ignored helper test `child`, which does what the variable says.
@@ -11,7 +11,7 @@ use std::path::Path;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use l3p_registry::{ArtifactKind, ListFilter, PutRequest, Registry};
+use l3p_registry::{ArtifactKind, ListFilter, PutRequest, Registry, RetentionPolicy};
 
 const CHILD_ENV: &str = "L3P_REGISTRY_CHILD";
 const DIR_ENV: &str = "L3P_REGISTRY_CHILD_DIR";
@@ -197,6 +197,44 @@ fn a_writer_killed_at_a_random_moment_leaves_a_valid_database() {
     );
 }
 
+#[test]
+fn a_gc_killed_inside_its_transaction_leaves_every_version() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut child = spawn_child("gc-killed", dir.path());
+    let mut lines = marked_lines(&mut child);
+    assert_eq!(lines.next().as_deref(), Some("stored 12"));
+    assert_eq!(lines.next().as_deref(), Some("in-gc 7"));
+    // The child has deleted 7 versions, their blobs and the deletion triggers, uncommitted.
+    child.kill().unwrap(); // SIGKILL
+    assert!(!child.wait().unwrap().success());
+    drop(lines);
+
+    let reg = Registry::open(dir.path()).unwrap();
+    let report = reg.check_integrity().unwrap();
+    assert!(report.is_ok(), "{report:?}");
+    assert_eq!(report.blobs_checked, 12);
+    let versions: Vec<u64> = reg
+        .list(&ListFilter::default())
+        .unwrap()
+        .iter()
+        .map(|m| m.version)
+        .collect();
+    assert_eq!(versions, (1..=12).collect::<Vec<_>>());
+    for version in 1..=12 {
+        let (_, bytes) = reg.get_blob(&format!("gc-crash@{version}")).unwrap();
+        assert_eq!(bytes, blob("gc", version as usize, 64 << 10));
+    }
+    {
+        let raw = rusqlite::Connection::open(reg.path()).unwrap();
+        let err = raw.execute("DELETE FROM versions", []).unwrap_err();
+        assert!(err.to_string().contains("immutable"), "{err}");
+    }
+    // A normal gc then does the job.
+    let done = reg.gc(&RetentionPolicy::default(), false).unwrap();
+    assert_eq!(done.versions_removed, 7);
+    assert_eq!(reg.check_integrity().unwrap().blobs_checked, 5);
+}
+
 /// Child process body (run only through `spawn_child`).
 #[test]
 #[ignore = "helper run as a child process by the other tests in this file"]
@@ -249,6 +287,26 @@ fn child() {
                 vec![7u8; 8 << 20],
             ))
             .unwrap();
+            unreachable!("the parent kills this process before the commit");
+        }
+        "gc-killed" => {
+            let mut reg = Registry::open(&dir).unwrap();
+            for i in 1..=12 {
+                reg.put(PutRequest::new(
+                    "gc-crash",
+                    ArtifactKind::Checkpoint,
+                    blob("gc", i, 64 << 10),
+                ))
+                .unwrap();
+            }
+            println!("{MARK} stored 12");
+            reg.set_before_gc_commit_hook(|report| {
+                use std::io::Write;
+                println!("{MARK} in-gc {}", report.versions_removed);
+                std::io::stdout().flush().unwrap();
+                std::thread::sleep(Duration::from_secs(120));
+            });
+            reg.gc(&RetentionPolicy::default(), false).unwrap();
             unreachable!("the parent kills this process before the commit");
         }
         "writer-loop" => {
