@@ -162,8 +162,20 @@ fn status_cmd(spec_path: &Path) -> anyhow::Result<()> {
         let state = match arm_state(arm) {
             ArmState::Done(d) => {
                 done += 1;
+                let walk = match &d.walk {
+                    Some(w) if w.walks => format!(
+                        "; walked at iteration {} ({:.2} M samples)",
+                        w.iteration,
+                        w.samples as f64 / 1e6
+                    ),
+                    Some(w) => format!(
+                        "; did not walk within its cap ({})",
+                        w.failures.first().map_or("no check", String::as_str)
+                    ),
+                    None => String::new(),
+                };
                 format!(
-                    "done, {} iterations in {:.1} min",
+                    "done, {} iterations in {:.1} min{walk}",
                     d.iterations,
                     d.wall_seconds / 60.0
                 )
@@ -182,6 +194,10 @@ fn status_cmd(spec_path: &Path) -> anyhow::Result<()> {
                 ),
                 None if iteration >= arm.iterations => format!(
                     "trained ({iteration}/{}), not yet evaluated: `l3p experiment run` evaluates it",
+                    arm.iterations
+                ),
+                None if arm.until_walks => format!(
+                    "interrupted at iteration {iteration} (cap {}); its walk checks are kept",
                     arm.iterations
                 ),
                 None => format!("interrupted at iteration {iteration}/{}", arm.iterations),

@@ -400,6 +400,12 @@ transfer_heads = "mapped"
     assert!(!zero["rows"].as_array().unwrap().is_empty(), "{zero}");
     assert!(!zero["failures"].as_array().unwrap().is_empty(), "{zero}");
 
+    let out = l3p(&["experiment", "status", "walks.toml"], cwd);
+    let status = text(&out);
+    assert!(
+        status.contains("go1-l3p-s1") && status.contains("did not walk within its cap"),
+        "{status}"
+    );
     let out = l3p(&["experiment", "report", "walks.toml"], cwd);
     let report = text(&out);
     assert!(out.status.success(), "{report}");
