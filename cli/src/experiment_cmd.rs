@@ -924,24 +924,10 @@ fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
     let out = spec.dir().join("report");
     std::fs::create_dir_all(&out)?;
     let table = markdown_table(&results);
-    let mut md = format!(
-        "# Experiment {} — {} of {} arms finished\n\nExperiment file: `{}`; base config: `{}`.\n\
-         Convergence (Cv.): the first iteration at which the smoothed curve ({window}-iteration \
-         moving average) has travelled 85% / 95% of the way from its start to its final value \
-         (means of the first and last 5% of iterations); final values are means over the last 5% of \
-         iterations. Tracking errors: the final policy under the training command mix ({} episodes). \
-         Zero-shot: the pretrained policy played on the target robot before any fine-tuning. \
-         The paper's numbers are from its rough-terrain curriculum with 5 seeds.\n\n{table}",
-        spec.experiment.name,
-        results.len(),
-        arms.len(),
-        spec_path.display(),
-        spec.experiment.base_config.display(),
-        spec.evaluation.episodes,
-    );
     let walk_table = samples_to_walk_table(&results);
+    let mut walk_section = String::new();
     if !walk_table.is_empty() {
-        md.push_str(&format!(
+        walk_section.push_str(&format!(
             "\n## Samples to walk\n\nEvery arm trained with `--until-walks` (the walk criterion, \
              checked every 25 iterations and after each promising 5-iteration screen, at 5 ms \
              physics with joint damping at the top of its range) and stopped when it held, or at \
@@ -951,9 +937,24 @@ fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
              the same robot's from-scratch arms of the family (`l3p` for `l3p-transfer`, `mlp` \
              for `mlp-transfer`; `≤`/`≥` when one side is a bound); the median iteration; and how \
              many of the policies the arms started from (iteration 0: pretrained core and the \
-             arm's transfer heads) already walked.\n\n{walk_table}"
+             arm's transfer heads) already walked.\n\n{walk_table}\n## The paper's table\n\n"
         ));
     }
+    let mut md = format!(
+        "# Experiment {} — {} of {} arms finished\n\nExperiment file: `{}`; base config: `{}`.\n\
+         Convergence (Cv.): the first iteration at which the smoothed curve ({window}-iteration \
+         moving average) has travelled 85% / 95% of the way from its start to its final value \
+         (means of the first and last 5% of iterations); final values are means over the last 5% of \
+         iterations. Tracking errors: the final policy under the training command mix ({} episodes). \
+         Zero-shot: the pretrained policy played on the target robot before any fine-tuning. \
+         The paper's numbers are from its rough-terrain curriculum with 5 seeds.\n{walk_section}\n{table}",
+        spec.experiment.name,
+        results.len(),
+        arms.len(),
+        spec_path.display(),
+        spec.experiment.base_config.display(),
+        spec.evaluation.episodes,
+    );
     // Curves per target robot: every method's mean over seeds with its min-max band.
     let mut robots: Vec<String> = results.iter().map(|r| r.robot.clone()).collect();
     robots.sort();

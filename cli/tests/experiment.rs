@@ -418,5 +418,13 @@ transfer_heads = "mapped"
         "{report}"
     );
     let readme = std::fs::read_to_string(exp.join("report/README.md")).unwrap();
-    assert!(readme.contains("## Samples to walk"), "{readme}");
+    let (walk, paper) = (
+        readme
+            .find("## Samples to walk")
+            .expect("a samples-to-walk section"),
+        readme
+            .find("| robot | method | seeds |")
+            .expect("the paper's table"),
+    );
+    assert!(walk < paper, "samples to walk comes first:\n{readme}");
 }
