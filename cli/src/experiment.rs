@@ -662,7 +662,13 @@ pub struct WalkOutcome {
 }
 
 /// How the walk criterion's heading bound words its failure (`l3p_robots::gait::WalkCriterion`).
-pub const HEADING_FAILURE: &str = "heading changes";
+const HEADING_FAILURE: &str = "heading changes";
+
+/// Whether every failing bound (none included) is the heading bound: a gait that tracks, stands
+/// tall, steps and is smooth, turning or not.
+pub fn only_heading_fails<'a>(mut failures: impl Iterator<Item = &'a str>) -> bool {
+    failures.all(|f| f.starts_with(HEADING_FAILURE))
+}
 
 /// Where an `--until-walks` arm stands once its trainer exited.
 #[derive(Debug, Clone, PartialEq)]
@@ -703,8 +709,8 @@ pub fn walk_progress(
                 !rows.is_empty()
                     && rows.iter().all(|r| {
                         r["walk_failures"].as_array().is_some_and(|f| {
-                            f.iter()
-                                .all(|x| x.as_str().is_some_and(|x| x.starts_with(HEADING_FAILURE)))
+                            f.iter().all(serde_json::Value::is_string)
+                                && only_heading_fails(f.iter().filter_map(|x| x.as_str()))
                         })
                     })
             })

@@ -560,12 +560,10 @@ fn initial_walk_check(arm: &Arm) -> anyhow::Result<WalkOutcome> {
     let (bytes, _) = l3p_policy::export_bytes(&model, robot)?;
     let (rows, walks) = crate::train_cmd::walk_check_export(&arm.config, bytes)?;
     let failures: Vec<String> = rows.iter().flat_map(|r| r.walk_failures.clone()).collect();
-    let gait_only = rows.len() == 2
-        || rows.iter().all(|r| {
-            r.walk_failures
-                .iter()
-                .all(|f| f.starts_with(crate::experiment::HEADING_FAILURE))
-        });
+    let gait_only = crate::experiment::only_heading_fails(
+        rows.iter()
+            .flat_map(|r| r.walk_failures.iter().map(String::as_str)),
+    );
     Ok(WalkOutcome {
         walks,
         gait: gait_only.then_some((0, 0)),

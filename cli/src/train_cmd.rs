@@ -206,12 +206,7 @@ pub fn walk_check_export(
     config: &Config,
     export: Vec<u8>,
 ) -> anyhow::Result<(Vec<crate::eval_cmd::EvalRow>, bool)> {
-    let robot_name = config
-        .actors
-        .first()
-        .map(|a| a.robot.clone())
-        .ok_or_else(|| anyhow::anyhow!("no [[actors]] in the config"))?;
-    let robot = l3p_robots::catalog::RobotSpec::by_name(&robot_name)?;
+    let robot = first_robot(config)?;
     let policy = l3p_policy::DeployPolicy::from_bytes(&export)?;
     let check = check_policy(0, export, robot, &policy, walk_env(config, robot)?)?;
     let walks = check.walks();
@@ -308,6 +303,16 @@ fn latest_policy(
     ))
 }
 
+/// The config's first actor's robot (the one walk checks play).
+fn first_robot(config: &Config) -> anyhow::Result<&'static l3p_robots::catalog::RobotSpec> {
+    let name = config
+        .actors
+        .first()
+        .map(|a| a.robot.as_str())
+        .ok_or_else(|| anyhow::anyhow!("no [[actors]] in the config"))?;
+    Ok(l3p_robots::catalog::RobotSpec::by_name(name)?)
+}
+
 /// The latest checkpoint's iteration, its first actor's robot and its export's bytes for it.
 fn latest_export(
     config: &Config,
@@ -315,12 +320,7 @@ fn latest_export(
 ) -> anyhow::Result<(u64, &'static l3p_robots::catalog::RobotSpec, Vec<u8>)> {
     let ckpt =
         l3p_policy::load_checkpoint(&daemon::checkpoint_path(run_dir), &l3p_policy::cpu_device())?;
-    let robot_name = config
-        .actors
-        .first()
-        .map(|a| a.robot.clone())
-        .ok_or_else(|| anyhow::anyhow!("no [[actors]] in the config"))?;
-    let robot = l3p_robots::catalog::RobotSpec::by_name(&robot_name)?;
+    let robot = first_robot(config)?;
     let (bytes, _) = l3p_policy::export_bytes(&ckpt.model, robot.name)?;
     Ok((ckpt.iteration, robot, bytes))
 }

@@ -886,15 +886,7 @@ fn plan_gc(conn: &Connection, keep_last: u64) -> Result<GcPlan, StoreError> {
         )
         .map_err(sql("planning gc"))?;
     let edges = stmt
-        .query_map([], |row| {
-            Ok((
-                row.get::<_, String>(0)?,
-                row.get::<_, i64>(1)? as u64,
-                row.get::<_, String>(2)?,
-                row.get::<_, String>(3)?,
-                row.get::<_, i64>(4)? as u64,
-            ))
-        })
+        .query_map([], lineage_edge)
         .map_err(sql("planning gc"))?
         .collect::<Result<Vec<_>, _>>()
         .map_err(sql("planning gc"))?;
@@ -1274,15 +1266,7 @@ fn walk(
     let mut links = Vec::new();
     while let Some((name, version)) = queue.pop_front() {
         let rows = stmt
-            .query_map(params![name, version as i64], |row| {
-                Ok((
-                    row.get::<_, String>(0)?,
-                    row.get::<_, i64>(1)? as u64,
-                    row.get::<_, String>(2)?,
-                    row.get::<_, String>(3)?,
-                    row.get::<_, i64>(4)? as u64,
-                ))
-            })
+            .query_map(params![name, version as i64], lineage_edge)
             .map_err(sql("walking lineage"))?
             .collect::<Result<Vec<_>, _>>()
             .map_err(sql("walking lineage"))?;
@@ -1303,4 +1287,16 @@ fn walk(
         }
     }
     Ok(links)
+}
+
+/// A `lineage` row read as `(name, version, role, parent_name, parent_version)` (the columns in
+/// that order).
+fn lineage_edge(row: &rusqlite::Row<'_>) -> rusqlite::Result<(String, u64, String, String, u64)> {
+    Ok((
+        row.get::<_, String>(0)?,
+        row.get::<_, i64>(1)? as u64,
+        row.get::<_, String>(2)?,
+        row.get::<_, String>(3)?,
+        row.get::<_, i64>(4)? as u64,
+    ))
 }
