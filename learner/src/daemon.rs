@@ -444,7 +444,7 @@ pub async fn run(
             _ = tick.tick() => out.announce(version).await?,
             event = events.recv() => match event {
                 None => break Err(DaemonError::Zenoh("subscriptions closed".into())),
-                Some(event) => route_event(&mut gather, &mut rejected, event, version),
+                Some(event) => route_event(&mut gather, &mut rejected, event, version, now_s()),
             },
         }
 
@@ -463,7 +463,7 @@ pub async fn run(
         }
         let (chunks, newly_silent) = gather.take(ready, now);
         for actor in newly_silent {
-            warn!(%actor, "silent at the gather timeout: not waited for until it sends a chunk");
+            warn!(%actor, ?ready, "silent: not waited for until it sends a chunk");
         }
 
         // Update on a blocking thread; the subscription tasks keep buffering meanwhile.
@@ -495,6 +495,7 @@ pub async fn run(
             dropped_chunks: gather.dropped(),
             rejected_chunks: rejected,
             silent_actors: gather.silent(),
+            gather_wait_seconds: waited,
             registry: out.uploader.as_ref().map(|u| {
                 let stats = u.stats();
                 [stats.backlog(), stats.failed_attempts(), stats.dropped()]
@@ -519,7 +520,7 @@ pub async fn run(
 }
 
 /// A chunk or a liveliness change, handed to the gather rule; a rejected chunk is counted.
-fn route_event(gather: &mut Gather, rejected: &mut u64, event: Event, version: u64) {
+fn route_event(gather: &mut Gather, rejected: &mut u64, event: Event, version: u64, now_s: f64) {
     match event {
         Event::ActorUp(id) => {
             info!(actor = %id, "actor joined");
@@ -531,7 +532,7 @@ fn route_event(gather: &mut Gather, rejected: &mut u64, event: Event, version: u
         }
         Event::Chunk(chunk) => {
             let (actor, chunk_version) = (actor_key(&chunk), chunk.policy_version);
-            match gather.chunk(*chunk, version) {
+            match gather.chunk(*chunk, version, now_s) {
                 ChunkFate::Stale => debug!(%actor, chunk_version, version, "dropped stale chunk"),
                 ChunkFate::ReplacedOlder => {
                     debug!(%actor, "replaced an older chunk of the same actor")
@@ -743,6 +744,8 @@ struct LoopCounters {
     dropped_chunks: u64,
     rejected_chunks: u64,
     silent_actors: usize,
+    /// How long the gather waited for chunks (from the policy's publication to the update).
+    gather_wait_seconds: f64,
     /// The registry uploader's backlog, failed attempts and dropped uploads, if it runs.
     registry: Option<[u64; 3]>,
 }
@@ -790,6 +793,7 @@ fn iteration_record(
     record.insert("dropped_chunks", counters.dropped_chunks as f64);
     record.insert("rejected_chunks", counters.rejected_chunks as f64);
     record.insert("silent_actors", counters.silent_actors as f64);
+    record.insert("gather_wait_seconds", counters.gather_wait_seconds);
     if let Some([backlog, failed, dropped]) = counters.registry {
         record.insert("registry_backlog", backlog as f64);
         record.insert("registry_failed_attempts", failed as f64);
