@@ -452,6 +452,7 @@ pub fn plan(spec: &ExperimentSpec, base: &Config) -> anyhow::Result<Vec<Arm>> {
         {
             config.env.terrain = l3p_robots::config::TerrainConfig {
                 fix_internal_edges: base.env.terrain.fix_internal_edges,
+                vertical_faces: base.env.terrain.vertical_faces,
                 ..l3p_robots::config::TerrainConfig::with_preset(t)
             };
             config.env.height_scan = t != TerrainPreset::Flat;

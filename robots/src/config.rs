@@ -157,6 +157,11 @@ pub struct TerrainConfig {
     /// by two triangles are corrected from the neighbours, so a foot sliding over the grid is not
     /// kicked by edges that are not really there. Off by default (policies trained before it).
     pub fix_internal_edges: bool,
+    /// Stairs and boxes with vertical faces: those tiles collide as a mesh of flat treads and
+    /// vertical risers (IsaacLab builds them as meshes) and the height scan sees the same steps,
+    /// instead of a heightfield whose risers are one-cell ramps (45–78° at 0.05 m). Off by default
+    /// (policies trained before it).
+    pub vertical_faces: bool,
 }
 
 impl Default for TerrainConfig {
@@ -178,6 +183,7 @@ impl Default for TerrainConfig {
             proportions: None,
             curriculum: None,
             fix_internal_edges: false,
+            vertical_faces: false,
         }
     }
 }
@@ -255,6 +261,7 @@ impl TerrainConfig {
             proportions,
             params: p,
             fix_internal_edges: self.fix_internal_edges,
+            vertical_faces: self.vertical_faces,
         };
         spec.validate()?;
         Ok(spec)

@@ -75,6 +75,15 @@ impl TerrainType {
     pub fn index(self) -> usize {
         self as usize
     }
+
+    /// Made of flat tops and vertical faces (stairs, boxes): IsaacLab builds these as meshes; here
+    /// they collide as [`Terrain::stepped_mesh`] when the spec asks for vertical faces.
+    pub fn is_stepped(self) -> bool {
+        matches!(
+            self,
+            TerrainType::PyramidStairs | TerrainType::InvertedPyramidStairs | TerrainType::Boxes
+        )
+    }
 }
 
 /// Relative share of columns per type (normalised when used).
@@ -261,6 +270,8 @@ pub struct TerrainSpec {
     pub params: SubTerrainParams,
     /// Build the heightfield with parry's `FIX_INTERNAL_EDGES` (see `TerrainConfig`).
     pub fix_internal_edges: bool,
+    /// Stepped tiles (stairs, boxes) as treads and vertical risers (see `TerrainConfig`).
+    pub vertical_faces: bool,
 }
 
 fn bad(key: &str, reason: impl Into<String>) -> ConfigError {
@@ -669,10 +680,12 @@ impl Terrain {
                 if nx == 0 || t == TerrainType::Flat {
                     continue;
                 }
-                let ix_lo = ((tx0 - x0) / res - 1e-3).ceil().max(0.0) as usize;
-                let ix_hi = (((tx0 + l - x0) / res + 1e-3).floor() as usize).min(nx - 1);
-                let iy_lo = ((ty0 - y0) / res - 1e-3).ceil().max(0.0) as usize;
-                let iy_hi = (((ty0 + l - y0) / res + 1e-3).floor() as usize).min(ny - 1);
+                let SampleRect {
+                    ix_lo,
+                    ix_hi,
+                    iy_lo,
+                    iy_hi,
+                } = sample_rect([tx0, ty0], l, [x0, y0], res, [nx, ny]);
                 let mut centre_max = f32::NEG_INFINITY;
                 for iy in iy_lo..=iy_hi {
                     let v = y0 + iy as f32 * res - ty0;
@@ -757,8 +770,9 @@ impl Terrain {
         self.heights[iy.min(self.ny - 1) * self.nx + ix.min(self.nx - 1)]
     }
 
-    /// Terrain height at world `(x, y)`: bilinear interpolation of the grid; 0 outside the grid
-    /// (the flat border continues) and for non-finite input.
+    /// Terrain height at world `(x, y)`: bilinear interpolation of the grid (on a stepped tile with
+    /// vertical faces, the nearest sample: the mesh's step); 0 outside the grid (the flat border
+    /// continues) and for non-finite input.
     #[inline]
     pub fn height_at(&self, x: f32, y: f32) -> f32 {
         if self.is_flat() {
@@ -770,6 +784,12 @@ impl Terrain {
         if !(fx >= 0.0 && fy >= 0.0 && fx <= (self.nx - 1) as f32 && fy <= (self.ny - 1) as f32) {
             return 0.0;
         }
+        if self.stepped_at(x, y) {
+            // The step of the nearest sample: what `stepped_mesh` builds.
+            let i = ((fx + 0.5) as usize).min(self.nx - 1);
+            let j = ((fy + 0.5) as usize).min(self.ny - 1);
+            return self.heights[j * self.nx + i];
+        }
         let i = (fx as usize).min(self.nx - 2);
         let j = (fy as usize).min(self.ny - 2);
         let (tx, ty) = (fx - i as f32, fy - j as f32);
@@ -778,6 +798,170 @@ impl Terrain {
         let a = self.heights[row0] * (1.0 - tx) + self.heights[row0 + 1] * tx;
         let b = self.heights[row1] * (1.0 - tx) + self.heights[row1 + 1] * tx;
         a * (1.0 - ty) + b * ty
+    }
+
+    /// The tile (`level`, `col`) that holds world `(x, y)`, if any (the border holds none).
+    pub fn tile_at(&self, x: f32, y: f32) -> Option<(usize, usize)> {
+        let l = self.spec.tile_size;
+        let fr = (x + 0.5 * self.spec.num_rows as f32 * l) / l;
+        let fc = (y + 0.5 * self.spec.num_cols as f32 * l) / l;
+        // Also false for NaN.
+        if !(fr >= 0.0 && fc >= 0.0) {
+            return None;
+        }
+        let (r, c) = (fr as usize, fc as usize);
+        (r < self.spec.num_rows && c < self.spec.num_cols).then_some((r, c))
+    }
+
+    /// Whether world `(x, y)` lies on a stepped tile built with vertical faces.
+    pub fn stepped_at(&self, x: f32, y: f32) -> bool {
+        self.spec.vertical_faces
+            && self
+                .tile_at(x, y)
+                .is_some_and(|(_, c)| self.col_types[c].is_stepped())
+    }
+
+    /// The grid samples of every stepped tile, when the spec asks for vertical faces (else none).
+    pub fn stepped_tiles(&self) -> Vec<SampleRect> {
+        if !self.spec.vertical_faces || self.is_flat() {
+            return Vec::new();
+        }
+        let l = self.spec.tile_size;
+        let mut out = Vec::new();
+        for r in 0..self.spec.num_rows {
+            for c in 0..self.spec.num_cols {
+                if self.col_types[c].is_stepped() {
+                    let tx0 = -0.5 * self.spec.num_rows as f32 * l + r as f32 * l;
+                    let ty0 = -0.5 * self.spec.num_cols as f32 * l + c as f32 * l;
+                    out.push(sample_rect(
+                        [tx0, ty0],
+                        l,
+                        [self.x0, self.y0],
+                        self.resolution,
+                        [self.nx, self.ny],
+                    ));
+                }
+            }
+        }
+        out
+    }
+
+    /// The mesh of the samples in `rect` as steps: each sample owns the square of the grid's
+    /// spacing around it (clipped to the rect) as a flat top at its height, and a vertical face
+    /// joins two neighbouring samples of different heights. Equal tops are merged into rectangles
+    /// and faces into strips, so a stairs tile is a few hundred triangles. World coordinates
+    /// (z up); triangles wind counter-clockwise seen from outside.
+    pub fn stepped_mesh(&self, rect: &SampleRect) -> (Vec<[f32; 3]>, Vec<[u32; 3]>) {
+        let SampleRect {
+            ix_lo,
+            ix_hi,
+            iy_lo,
+            iy_hi,
+        } = *rect;
+        let res = self.resolution;
+        // Cell edges: sample k's cell is [edge(k), edge(k + 1)], clipped to the rect.
+        let edge = |k: usize, lo: usize, hi: usize, origin: f32| -> f32 {
+            let k = k.clamp(lo, hi + 1);
+            if k == lo {
+                origin + lo as f32 * res
+            } else if k == hi + 1 {
+                origin + hi as f32 * res
+            } else {
+                origin + (k as f32 - 0.5) * res
+            }
+        };
+        let ex = |k: usize| edge(k, ix_lo, ix_hi, self.x0);
+        let ey = |k: usize| edge(k, iy_lo, iy_hi, self.y0);
+        let h = |ix: usize, iy: usize| self.heights[iy * self.nx + ix];
+        let mut mesh = MeshBuilder::default();
+
+        // Tops: runs of equal height along x, merged with the same run of the next row.
+        let mut open: Vec<[usize; 4]> = Vec::new(); // [ix0, ix1, iy0, iy1] (inclusive)
+        let mut tops: Vec<[usize; 4]> = Vec::new();
+        for iy in iy_lo..=iy_hi {
+            let mut next = Vec::new();
+            let mut ix0 = ix_lo;
+            for ix in ix_lo..=ix_hi {
+                if ix == ix_hi || h(ix + 1, iy) != h(ix0, iy) {
+                    let run = [ix0, ix];
+                    let key = h(ix0, iy).to_bits();
+                    match open.iter().position(|o| {
+                        o[..2] == run && o[3] + 1 == iy && h(o[0], o[2]).to_bits() == key
+                    }) {
+                        Some(k) => {
+                            let mut o = open.swap_remove(k);
+                            o[3] = iy;
+                            next.push(o);
+                        }
+                        None => next.push([ix0, ix, iy, iy]),
+                    }
+                    ix0 = ix + 1;
+                }
+            }
+            tops.append(&mut open);
+            open = next;
+        }
+        tops.append(&mut open);
+        for [ix0, ix1, iy0, iy1] in tops {
+            let z = h(ix0, iy0);
+            let (x0, x1, y0, y1) = (ex(ix0), ex(ix1 + 1), ey(iy0), ey(iy1 + 1));
+            mesh.quad([[x0, y0, z], [x1, y0, z], [x1, y1, z], [x0, y1, z]]);
+        }
+
+        // Faces between x-neighbours (at x = ex(ix + 1)), merged along y while the same.
+        let mut faces: Vec<(usize, usize, usize, u32, u32)> = Vec::new(); // (ix, iy0, iy1, lo, hi)
+        for iy in iy_lo..=iy_hi {
+            for ix in ix_lo..ix_hi {
+                let (a, b) = (h(ix, iy), h(ix + 1, iy));
+                if a != b {
+                    let key = (ix, a.to_bits(), b.to_bits());
+                    match faces
+                        .iter_mut()
+                        .rev()
+                        .find(|f| (f.0, f.3, f.4) == key && f.2 + 1 == iy)
+                    {
+                        Some(f) => f.2 = iy,
+                        None => faces.push((ix, iy, iy, key.1, key.2)),
+                    }
+                }
+            }
+        }
+        for (ix, iy0, iy1, a, b) in faces {
+            let (a, b) = (f32::from_bits(a), f32::from_bits(b));
+            let (x, y0, y1) = (ex(ix + 1), ey(iy0), ey(iy1 + 1));
+            let (lo, hi) = (a.min(b), a.max(b));
+            // Facing the lower side: −x when the left sample is the lower one.
+            if a < b {
+                mesh.quad([[x, y1, lo], [x, y0, lo], [x, y0, hi], [x, y1, hi]]);
+            } else {
+                mesh.quad([[x, y0, lo], [x, y1, lo], [x, y1, hi], [x, y0, hi]]);
+            }
+        }
+        // Faces between y-neighbours (at y = ey(iy + 1)), merged along x while the same.
+        let mut faces: Vec<(usize, usize, usize, u32, u32)> = Vec::new(); // (iy, ix0, ix1, lo, hi)
+        for iy in iy_lo..iy_hi {
+            for ix in ix_lo..=ix_hi {
+                let (a, b) = (h(ix, iy), h(ix, iy + 1));
+                if a != b {
+                    let key = (iy, a.to_bits(), b.to_bits());
+                    match faces.last_mut() {
+                        Some(f) if (f.0, f.3, f.4) == key && f.2 + 1 == ix => f.2 = ix,
+                        _ => faces.push((iy, ix, ix, key.1, key.2)),
+                    }
+                }
+            }
+        }
+        for (iy, ix0, ix1, a, b) in faces {
+            let (a, b) = (f32::from_bits(a), f32::from_bits(b));
+            let (y, x0, x1) = (ey(iy + 1), ex(ix0), ex(ix1 + 1));
+            let (lo, hi) = (a.min(b), a.max(b));
+            if a < b {
+                mesh.quad([[x0, y, lo], [x1, y, lo], [x1, y, hi], [x0, y, hi]]);
+            } else {
+                mesh.quad([[x1, y, lo], [x0, y, lo], [x0, y, hi], [x1, y, hi]]);
+            }
+        }
+        (mesh.vertices, mesh.triangles)
     }
 
     /// Height scan around a base at `pos` (world) with yaw `yaw`, written into `out[..187]` in
@@ -968,6 +1152,46 @@ impl Curriculum {
     /// Number of columns of the terrain this curriculum was built for.
     pub fn num_cols(&self) -> usize {
         self.num_cols
+    }
+}
+
+/// Grid samples `ix_lo..=ix_hi` × `iy_lo..=iy_hi` of one tile (a tile shares its edge samples with
+/// its neighbours).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SampleRect {
+    pub ix_lo: usize,
+    pub ix_hi: usize,
+    pub iy_lo: usize,
+    pub iy_hi: usize,
+}
+
+/// The samples of the tile whose lower corner is `corner` (world), side `l`, on a grid at `origin`
+/// with spacing `res` and `n` samples per axis.
+fn sample_rect(corner: [f32; 2], l: f32, origin: [f32; 2], res: f32, n: [usize; 2]) -> SampleRect {
+    let lo = |a: usize| ((corner[a] - origin[a]) / res - 1e-3).ceil().max(0.0) as usize;
+    let hi = |a: usize| (((corner[a] + l - origin[a]) / res + 1e-3).floor() as usize).min(n[a] - 1);
+    SampleRect {
+        ix_lo: lo(0),
+        ix_hi: hi(0),
+        iy_lo: lo(1),
+        iy_hi: hi(1),
+    }
+}
+
+/// Vertices and triangles of a mesh under construction.
+#[derive(Default)]
+struct MeshBuilder {
+    vertices: Vec<[f32; 3]>,
+    triangles: Vec<[u32; 3]>,
+}
+
+impl MeshBuilder {
+    /// A planar quad, corners counter-clockwise seen from the side it faces.
+    fn quad(&mut self, corners: [[f32; 3]; 4]) {
+        let first = self.vertices.len() as u32;
+        self.vertices.extend(corners);
+        self.triangles
+            .extend([[first, first + 1, first + 2], [first, first + 2, first + 3]]);
     }
 }
 

@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use rapier3d::math::{Pose, Rot3, Vec3};
-use rapier3d::parry::shape::HeightFieldFlags;
+use rapier3d::parry::shape::{HeightField, HeightFieldCellStatus, HeightFieldFlags};
 use rayon::prelude::*;
 
 use crate::actuator::Actuator;
@@ -657,17 +657,35 @@ fn terrain_blocks(t: &Terrain, block: usize) -> Vec<(rapier3d::prelude::SharedSh
             } else {
                 HeightFieldFlags::empty()
             };
-            out.push((
-                rapier3d::prelude::SharedShape::heightfield_with_flags(
-                    m,
-                    Vec3::new(sx, 1.0, sy),
-                    flags,
-                ),
-                pose,
-            ));
+            let mut field = HeightField::with_flags(m, Vec3::new(sx, 1.0, sy), flags);
+            // Cells of stepped tiles are the meshes' (below); a block of only those is dropped.
+            let mut kept = 0;
+            for iy in 0..by - 1 {
+                for ix in 0..bx - 1 {
+                    let cx = t.x0 + (x_start + ix) as f32 * t.resolution + 0.5 * t.resolution;
+                    let cy = t.y0 + (y_start + iy) as f32 * t.resolution + 0.5 * t.resolution;
+                    if t.stepped_at(cx, cy) {
+                        field.set_cell_status(by - 2 - iy, ix, HeightFieldCellStatus::CELL_REMOVED);
+                    } else {
+                        kept += 1;
+                    }
+                }
+            }
+            if kept > 0 {
+                out.push((rapier3d::prelude::SharedShape::new(field), pose));
+            }
             y_start = y_end;
         }
         x_start = x_end;
+    }
+    for rect in t.stepped_tiles() {
+        let (vertices, triangles) = t.stepped_mesh(&rect);
+        let vertices = vertices.into_iter().map(Vec3::from).collect();
+        match rapier3d::prelude::SharedShape::trimesh(vertices, triangles) {
+            Ok(mesh) => out.push((mesh, Pose::IDENTITY)),
+            // Only an empty mesh fails (a tile of no samples); its cells are removed above.
+            Err(e) => tracing::warn!(?rect, "stepped tile without a mesh: {e}"),
+        }
     }
     out
 }
@@ -821,6 +839,152 @@ mod tests {
     use super::*;
     use crate::config::{TerrainConfig, TerrainPreset};
     use crate::terrain::Terrain;
+
+    /// A 2 × 2 curriculum terrain of stairs and boxes (one type per column).
+    fn stepped_terrain(vertical_faces: bool, columns: [TerrainType; 2]) -> Terrain {
+        let mut c = TerrainConfig::with_preset(TerrainPreset::Curriculum);
+        c.border_width = 1.0;
+        c.num_rows = 2;
+        c.num_cols = 2;
+        c.max_init_level = 1;
+        c.vertical_faces = vertical_faces;
+        let mut p = crate::terrain::TypeProportions::zero();
+        for t in columns {
+            match t {
+                TerrainType::PyramidStairs => p.pyramid_stairs = 1.0,
+                TerrainType::InvertedPyramidStairs => p.inverted_pyramid_stairs = 1.0,
+                TerrainType::Boxes => p.boxes = 1.0,
+                _ => unreachable!("a stepped type"),
+            }
+        }
+        c.proportions = Some(p);
+        let t = Terrain::generate(&c.resolve("anymal_c").unwrap()).unwrap();
+        assert_eq!([t.tile_type(0), t.tile_type(1)], columns);
+        t
+    }
+
+    /// The first riser along x through the middle of tile (1, 0): the samples on either side
+    /// and their heights (lower, higher).
+    fn first_riser(t: &Terrain) -> (f32, f32, f32, f32) {
+        let [cx, cy, _] = t.tile_origin(1, 0);
+        let iy = ((cy - t.y0) / t.resolution).round() as usize;
+        let ix0 = ((cx - 4.0 - t.x0) / t.resolution).round() as usize;
+        for ix in ix0..t.nx - 1 {
+            let (a, b) = (t.sample(ix, iy), t.sample(ix + 1, iy));
+            if (a - b).abs() > 0.05 {
+                let x_face = t.x0 + (ix as f32 + 0.5) * t.resolution;
+                return (x_face, cy, a, b);
+            }
+        }
+        panic!("no riser on the tile");
+    }
+
+    /// The closest contact of a ball of `radius` at `centre` with the ground shapes.
+    fn ground_contact(
+        blocks: &[(rapier3d::prelude::SharedShape, Pose)],
+        centre: Vec3,
+        radius: f32,
+    ) -> rapier3d::parry::query::Contact {
+        let ball = rapier3d::parry::shape::Ball::new(radius);
+        let at = Pose::from_translation(centre);
+        blocks
+            .iter()
+            .filter_map(|(shape, pose)| {
+                rapier3d::parry::query::contact(pose, shape.as_ref(), &at, &ball, 0.01).unwrap()
+            })
+            .min_by(|a, b| a.dist.total_cmp(&b.dist))
+            .expect("the ball touches the ground")
+    }
+
+    /// `[env.terrain] vertical_faces`: a foot pressed against a stair riser at mid-height meets a
+    /// vertical face (horizontal contact normal); on the heightfield it meets a one-cell ramp.
+    #[test]
+    fn a_foot_meets_a_vertical_riser_only_with_vertical_faces() {
+        let columns = [TerrainType::PyramidStairs, TerrainType::Boxes];
+        for vertical in [true, false] {
+            let t = stepped_terrain(vertical, columns);
+            let blocks = terrain_blocks(&t, GROUND_BLOCK);
+            let (x_face, y, a, b) = first_riser(&t);
+            let (lo, hi) = (a.min(b), a.max(b));
+            let radius = 0.02;
+            // On the lower side, 1 mm from the face (ramp: from its midpoint), at mid-riser.
+            let side = if a < b { -1.0 } else { 1.0 };
+            let centre = Vec3::new(x_face + side * (radius + 0.001), y, 0.5 * (lo + hi));
+            let contact = ground_contact(&blocks, centre, radius);
+            // normal1 points from the ground into the ball.
+            let n = contact.normal1;
+            let tilt_deg = n.z.abs().asin().to_degrees();
+            if vertical {
+                assert!(
+                    tilt_deg < 1.0 && (n.x * side) > 0.999,
+                    "riser {lo}..{hi} m: normal {n:?} ({tilt_deg:.1}° from horizontal)"
+                );
+            } else {
+                assert!(
+                    tilt_deg > 10.0,
+                    "a heightfield riser is a ramp: normal {n:?} ({tilt_deg:.1}°)"
+                );
+            }
+        }
+    }
+
+    /// With vertical faces the stepped tiles are meshes whose every face is level or vertical,
+    /// the heightfield keeps none of their cells, and a ray cast down onto the ground hits the
+    /// height the height scan reads (`Terrain::height_at`).
+    #[test]
+    fn stepped_tiles_are_meshes_of_treads_and_risers_the_scan_sees() {
+        let columns = [TerrainType::InvertedPyramidStairs, TerrainType::Boxes];
+        let t = stepped_terrain(true, columns);
+        let blocks = terrain_blocks(&t, GROUND_BLOCK);
+        let meshes: Vec<_> = blocks.iter().filter_map(|(s, _)| s.as_trimesh()).collect();
+        assert_eq!(meshes.len(), 4, "one mesh per stepped tile");
+        for mesh in &meshes {
+            assert!(
+                mesh.indices().len() < 20_000,
+                "merged: {}",
+                mesh.indices().len()
+            );
+            for tri in mesh.triangles() {
+                let n = tri.normal().expect("no degenerate triangle");
+                assert!(
+                    (n.z - 1.0).abs() < 1e-5 || n.z.abs() < 1e-5,
+                    "a face that is neither level nor vertical: {n:?}"
+                );
+            }
+        }
+        for (shape, _) in &blocks {
+            if let Some(field) = shape.as_heightfield() {
+                let (rows, cols) = field.num_cells_ij();
+                let kept = (0..rows)
+                    .flat_map(|i| (0..cols).map(move |j| (i, j)))
+                    .filter(|&(i, j)| {
+                        !field
+                            .cell_status(i, j)
+                            .contains(HeightFieldCellStatus::CELL_REMOVED)
+                    })
+                    .count();
+                assert!(kept > 0, "a block of only removed cells is dropped");
+            }
+        }
+        let mut rng = SmallRng::seed_from_u64(3);
+        let area = t.spec.tile_size * t.spec.num_rows as f32;
+        for _ in 0..300 {
+            let x = rng.random_range(-0.5 * area..0.5 * area);
+            let y = rng.random_range(-area..area) * 0.5;
+            let ray =
+                rapier3d::parry::query::Ray::new(Vec3::new(x, y, 5.0), Vec3::new(0.0, 0.0, -1.0));
+            let hit = blocks
+                .iter()
+                .filter_map(|(s, pose)| s.cast_ray(pose, &ray, 10.0, true))
+                .fold(f32::INFINITY, f32::min);
+            let z = 5.0 - hit;
+            assert!(
+                (z - t.height_at(x, y)).abs() < 1e-4,
+                "at ({x}, {y}): ground {z}, scan {}",
+                t.height_at(x, y)
+            );
+        }
+    }
 
     /// `[env.terrain] fix_internal_edges` reaches every heightfield block the physics collides with.
     #[test]
