@@ -35,7 +35,8 @@ pub enum RobotsCommand {
     /// trains, evaluates, deploys and exports by name like a built-in one.
     Add(AddArgs),
     /// Load a robot (built-in name or URDF path), print its links, joints and mass, hold the default
-    /// pose under PD for 2 s on flat ground and print the settled base height.
+    /// pose under PD for 2 s on flat ground and print the settled base height and the share of
+    /// the weight on the feet (an error when under 90%, naming the links that carry the rest).
     Check {
         /// Robot name (built-in: a1, go1, go2, anymal_b, anymal_c, anymal_d, spot; or added) or a
         /// .urdf path.
