@@ -35,7 +35,8 @@ pub enum RobotsCommand {
     /// trains, evaluates, deploys and exports by name like a built-in one.
     Add(AddArgs),
     /// Load a robot (built-in name or URDF path), print its links, joints and mass, hold the default
-    /// pose under PD for 2 s on flat ground and print the settled base height.
+    /// pose under PD for 2 s on flat ground and print the settled base height and the share of
+    /// the weight on the feet (an error when under 90%, naming the links that carry the rest).
     Check {
         /// Robot name (built-in: a1, go1, go2, anymal_b, anymal_c, anymal_d, spot; or added) or a
         /// .urdf path.
@@ -72,13 +73,16 @@ pub struct AddArgs {
     /// Action scale instead of 0.25.
     #[arg(long)]
     pub action_scale: Option<f32>,
-    /// Effort limit (N·m) for leg joints whose URDF has none.
+    /// Effort limit (N·m) for leg joints whose URDF has none, or one implausibly high for the
+    /// robot's size (used instead of the inferred bound).
     #[arg(long)]
     pub effort: Option<f32>,
-    /// Velocity limit (rad/s) for leg joints whose URDF has none.
+    /// Velocity limit (rad/s) for leg joints whose URDF has none, or one implausibly high for
+    /// the robot's size (used instead of the inferred bound).
     #[arg(long)]
     pub velocity: Option<f32>,
-    /// Write the description even if the robot does not stand at the inferred pose and gains.
+    /// Write the description even if the robot does not stand at the inferred pose and gains,
+    /// or stands but not on its feet (they carry under 90% of its weight).
     #[arg(long)]
     pub force: bool,
     /// Replace an added robot of the same name.
@@ -177,12 +181,14 @@ fn add(args: &AddArgs) -> anyhow::Result<()> {
         d.termination_links.join(", ")
     );
     println!(
-        "stands: kinematic height {:.3} m, settled {:.3} m ({:.0}%) after {} s, gravity z {:.3}",
+        "stands: kinematic height {:.3} m, settled {:.3} m ({:.0}%) after {} s, gravity z {:.3}; feet carry {:.0}% of the weight (besides them: {})",
         inferred.standing_height,
         inferred.settled_height,
         100.0 * inferred.settled_height / inferred.standing_height.max(1e-6),
         l3p_robots::added::STAND_CHECK_SECONDS,
-        inferred.settled_gravity_z
+        inferred.settled_gravity_z,
+        100.0 * inferred.foot_share,
+        inferred.carriers
     );
     for n in &inferred.notes {
         println!("note: {n}");
@@ -437,5 +443,12 @@ fn check(robot: &str, seconds: f32, training_gains: bool) -> anyhow::Result<()> 
         r.foot_force,
         r.finite
     );
+    println!(
+        "feet carry {:.0}% of the weight ({:.1} N); besides them: {}",
+        100.0 * r.foot_share(),
+        r.weight,
+        r.carriers()
+    );
+    r.require_on_feet(&model.name)?;
     Ok(())
 }

@@ -11,13 +11,18 @@
 //!   limits leave more room for (on a tie towards the body's middle, ANYmal's "X": front knees
 //!   backwards, rear knees forwards) — then checked by simulation: dropped on flat
 //!   ground and held with the inferred gains for 2 s, the robot must stay upright above
-//!   [`MIN_SETTLED_FRACTION`] of its kinematic standing height;
+//!   [`MIN_SETTLED_FRACTION`] of its kinematic standing height with its feet carrying at least
+//!   [`crate::bench::MIN_FOOT_SHARE`] of its weight (a robot resting on its shanks or knees is refused, naming
+//!   the links that carry the rest);
 //! - PD gains from the load: `kp` so that a quarter of the robot's weight on each foot deflects
 //!   the most loaded joint by [`STATIC_SAG_RAD`] (A1 → kp ≈ 60, the shipped A1 recipe's value),
 //!   at most the smallest effort limit over [`MIN_SATURATION_ERROR_RAD`]; `kd = kp / 50` (the
 //!   recipe's ratio);
-//! - effort and velocity limits from the URDF (a leg joint without them is an error naming it,
-//!   unless the caller fills them in), action scale [`DEFAULT_ACTION_SCALE`] (IsaacLab's Unitree
+//! - effort and velocity limits from the URDF (leg joints without them are one error naming every
+//!   missing limit, unless the caller fills them in; a limit far above what the robot's size
+//!   needs — effort over [`EFFORT_OVER_STANCE`] times the stance torque, velocity that moves a
+//!   thigh's end faster than [`MAX_THIGH_TIP_SPEED`] — is replaced by that bound, or the
+//!   caller's value, with a note), action scale [`DEFAULT_ACTION_SCALE`] (IsaacLab's Unitree
 //!   value), penalised contacts on thighs and shanks, termination on trunk contact.
 //!
 //! Joint positions stay in the file's convention: the canonical order is applied, the canonical
@@ -35,7 +40,7 @@ use std::sync::RwLock;
 use crate::math::Vec3;
 use serde::{Deserialize, Serialize};
 
-use crate::bench::stand_check;
+use crate::bench::{NotOnFeet, stand_check};
 use crate::catalog::{Family, Gains, NUM_JOINTS, RobotSpec};
 use crate::infer::{InferError, InferredLegs, LegId, infer_quadruped};
 use crate::model::{JointKind, RobotModel};
@@ -62,6 +67,14 @@ pub const DEFAULT_ACTION_SCALE: f32 = 0.25;
 pub const MIN_SETTLED_FRACTION: f32 = 0.85;
 /// Seconds of the simulated standing check.
 pub const STAND_CHECK_SECONDS: f32 = 2.0;
+/// An effort limit above this many times the stance torque (the most loaded joint's torque with a
+/// quarter of the weight on each foot) is implausible and replaced by that bound (A1: 33.5 N·m
+/// is 7 times its stance torque; jumping robots need 4 g on one pair of legs, 8 times).
+pub const EFFORT_OVER_STANCE: f32 = 20.0;
+/// A velocity limit that moves the thigh's end (the knee) faster than this (m/s) is implausible
+/// and replaced by that bound (A1's 21 rad/s on a 0.2 m thigh is 4.2 m/s, Mini Cheetah's 40 rad/s
+/// 8.4 m/s).
+pub const MAX_THIGH_TIP_SPEED: f32 = 10.0;
 
 /// An added robot as its TOML file says (`<robots dir>/<name>.toml`, the URDF beside it).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -117,6 +130,11 @@ pub struct Inference {
     pub settled_height: f32,
     /// Base-frame gravity z after the standing check (−1 = level).
     pub settled_gravity_z: f32,
+    /// Share of the weight the feet carry at the settled pose.
+    pub foot_share: f32,
+    /// Links other than the feet that carry weight at the settled pose (see
+    /// [`crate::bench::StandReport::carriers`]).
+    pub carriers: String,
     /// Things a reviewer should know (loader repairs, filled-in limits).
     pub notes: Vec<String>,
 }
@@ -132,9 +150,9 @@ pub struct Overrides {
     pub kd: Option<f32>,
     /// Action scale.
     pub action_scale: Option<f32>,
-    /// Effort limit (N·m) for leg joints whose URDF has none.
+    /// Effort limit (N·m) for leg joints whose URDF has none or an implausible one.
     pub effort: Option<f32>,
-    /// Velocity limit (rad/s) for leg joints whose URDF has none.
+    /// Velocity limit (rad/s) for leg joints whose URDF has none or an implausible one.
     pub velocity: Option<f32>,
 }
 
@@ -147,15 +165,13 @@ pub enum AddError {
     /// Not a quadruped l3p can map.
     #[error(transparent)]
     Infer(#[from] InferError),
-    /// A leg joint without an effort or velocity limit.
-    #[error(
-        "joint `{joint}` has no {what} limit in the URDF\nhint: add <limit {what}=\"…\"/> to it, or pass --{what} for joints without one"
-    )]
-    MissingLimit {
-        /// Joint name.
-        joint: String,
-        /// `effort` or `velocity`.
-        what: &'static str,
+    /// Leg joints without an effort or velocity limit, every one at once.
+    #[error("{}", missing_limits_message(effort, velocity))]
+    MissingLimits {
+        /// Joints without an effort limit.
+        effort: Vec<String>,
+        /// Joints without a velocity limit.
+        velocity: Vec<String>,
     },
     /// A value out of range.
     #[error("`{key}` = {value}: {why}")]
@@ -177,7 +193,7 @@ pub enum AddError {
     },
     /// The simulated standing check failed.
     #[error(
-        "`{name}` does not stand at the inferred pose and gains: base settled at {settled:.3} m of {standing:.3} m (gravity z {gravity_z:.2})\nhint: edit default_pose, kp or kd in the description (or pass --kp/--kd, or --force to write it anyway)"
+        "`{name}` does not stand at the inferred pose and gains: base settled at {settled:.3} m of {standing:.3} m (gravity z {gravity_z:.2}); its feet carry {feet:.0}% of its weight, besides them: {carriers}\nhint: edit default_pose, kp or kd in the description (or pass --kp/--kd, or --force to write it anyway)"
     )]
     DoesNotStand {
         /// Robot name.
@@ -188,7 +204,14 @@ pub enum AddError {
         standing: f32,
         /// Base-frame gravity z.
         gravity_z: f32,
+        /// Percent of the weight on the feet.
+        feet: f32,
+        /// The links besides the feet that carry weight.
+        carriers: String,
     },
+    /// The robot stands, but not on its feet.
+    #[error("{0}\n(or pass --force to write it anyway)")]
+    NotOnFeet(#[from] NotOnFeet),
     /// A name already taken by a catalog robot, or not `[a-z0-9_]+`.
     #[error("robot name `{0}`: {1}")]
     Name(String, String),
@@ -211,6 +234,22 @@ pub enum AddError {
     /// A simulation error during the standing check.
     #[error("standing check: {0}")]
     Sim(String),
+}
+
+fn missing_limits_message(effort: &[String], velocity: &[String]) -> String {
+    let mut parts = Vec::new();
+    let mut flags = Vec::new();
+    for (what, joints) in [("effort", effort), ("velocity", velocity)] {
+        if !joints.is_empty() {
+            parts.push(format!("no {what} limit: {}", joints.join(", ")));
+            flags.push(format!("--{what}"));
+        }
+    }
+    format!(
+        "leg joints without limits in the URDF ({})\nhint: add <limit effort=\"…\" velocity=\"…\"/> to them, or pass {} for joints without one",
+        parts.join("; "),
+        flags.join(" and ")
+    )
 }
 
 /// Lower-cased name with every non-alphanumeric as `_` (`Unitree A1` → `unitree_a1`).
@@ -289,30 +328,6 @@ pub fn describe(
     check_name(&name)?;
     let mut notes = legs.warnings.clone();
     let joints: Vec<_> = legs.joints().collect();
-    let joint_spec = |body: usize| model.bodies[body].joint.as_ref();
-    let mut effort_limit = [0.0; NUM_JOINTS];
-    let mut velocity_limit = [0.0; NUM_JOINTS];
-    for (k, j) in joints.iter().enumerate() {
-        let spec = joint_spec(j.body);
-        let limit = |v: Option<f32>, fill: Option<f32>, what: &'static str| match v
-            .filter(|x| *x > 0.0 && x.is_finite())
-        {
-            Some(x) => Ok(x),
-            None => fill.ok_or_else(|| AddError::MissingLimit {
-                joint: j.name.clone(),
-                what,
-            }),
-        };
-        effort_limit[k] = limit(spec.and_then(|s| s.effort), overrides.effort, "effort")?;
-        velocity_limit[k] = limit(
-            spec.and_then(|s| s.velocity),
-            overrides.velocity,
-            "velocity",
-        )?;
-    }
-    if overrides.effort.is_some() || overrides.velocity.is_some() {
-        notes.push("limits missing from the URDF were filled in from the command line".into());
-    }
 
     // Rounded so that the file reads as written by hand (mrad, 0.1 N·m/rad, 0.01 N·m·s/rad).
     let round = |v: f32, unit: f32| (v / unit).round() / (1.0 / unit).round();
@@ -320,11 +335,14 @@ pub fn describe(
     let pose_model = pose_in_model_order(model, &legs, &default_pose);
     let standing_height = model.standing_height(&pose_model);
     let mass = model.total_mass();
+    let stance_torque = static_stance_torque(model, &legs, &default_pose, mass);
+    let (effort_limit, velocity_limit) =
+        limits(model, &legs, overrides, (mass, stance_torque), &mut notes)?;
 
     let kp = match overrides.kp {
         Some(kp) => kp,
         None => {
-            let tau = static_stance_torque(model, &legs, &default_pose, mass);
+            let tau = stance_torque;
             let cap = effort_limit.iter().cloned().fold(f32::INFINITY, f32::min)
                 / MIN_SATURATION_ERROR_RAD;
             (tau / STATIC_SAG_RAD).clamp(5.0, cap.max(5.0))
@@ -386,12 +404,23 @@ pub fn describe(
             settled: report.settled_height,
             standing: standing_height,
             gravity_z: report.gravity_z,
+            feet: 100.0 * report.foot_share(),
+            carriers: report.carriers(),
         });
+    }
+    if stands && !force {
+        report.require_on_feet(&description.name)?;
     }
     if !stands {
         notes.push(format!(
             "written with --force although it does not stand: settled at {:.3} m of {:.3} m",
             report.settled_height, standing_height
+        ));
+    } else if !report.on_feet() {
+        notes.push(format!(
+            "written with --force although it does not stand on its feet: they carry {:.0}% of its weight; the rest is carried by {}",
+            100.0 * report.foot_share(),
+            report.carriers()
         ));
     }
     Ok(Inference {
@@ -400,8 +429,106 @@ pub fn describe(
         standing_height,
         settled_height: report.settled_height,
         settled_gravity_z: report.gravity_z,
+        foot_share: report.foot_share(),
+        carriers: report.carriers(),
         notes,
     })
+}
+
+/// Effort and velocity limits of the leg joints (canonical order) from the URDF: every missing
+/// one is filled from `overrides` or reported in one [`AddError::MissingLimits`]; one far above
+/// what a robot of `mass` (kg) with `stance_torque` (N·m) needs is replaced by the bound (or the
+/// override), with a note.
+fn limits(
+    model: &RobotModel,
+    legs: &InferredLegs,
+    overrides: &Overrides,
+    (mass, stance_torque): (f32, f32),
+    notes: &mut Vec<String>,
+) -> Result<([f32; NUM_JOINTS], [f32; NUM_JOINTS]), AddError> {
+    let joints: Vec<_> = legs.joints().collect();
+    // The knee joint's offset from the hip joint: the thigh.
+    let thigh = legs
+        .legs
+        .iter()
+        .map(|l| {
+            model.bodies[l.joints[2].body]
+                .joint
+                .as_ref()
+                .map_or(0.0, |j| j.origin.translation.length())
+        })
+        .fold(0.0f32, f32::max);
+    let round1 = |v: f32| (v * 10.0).round() / 10.0;
+    let bounds = [
+        (
+            "effort",
+            "N·m",
+            round1(EFFORT_OVER_STANCE * stance_torque),
+            overrides.effort,
+        ),
+        (
+            "velocity",
+            "rad/s",
+            round1(MAX_THIGH_TIP_SPEED / thigh.max(1e-3)),
+            overrides.velocity,
+        ),
+    ];
+    let mut out = [[0.0f32; NUM_JOINTS]; 2];
+    let mut missing: [Vec<String>; 2] = Default::default();
+    for (w, (what, unit, bound, fill)) in bounds.into_iter().enumerate() {
+        let mut implausible: Vec<String> = Vec::new();
+        let mut filled = false;
+        for (k, j) in joints.iter().enumerate() {
+            let spec = model.bodies[j.body].joint.as_ref();
+            let v = spec
+                .and_then(|s| if w == 0 { s.effort } else { s.velocity })
+                .filter(|x| *x > 0.0 && x.is_finite());
+            out[w][k] = match (v, fill) {
+                (None, Some(f)) => {
+                    filled = true;
+                    f
+                }
+                (None, None) => {
+                    missing[w].push(j.name.clone());
+                    0.0
+                }
+                (Some(v), _) if bound > 0.0 && v > bound => {
+                    implausible.push(format!("{} ({v} {unit})", j.name));
+                    fill.unwrap_or(bound)
+                }
+                (Some(v), _) => v,
+            };
+        }
+        if filled {
+            notes.push(format!(
+                "{what} limits missing from the URDF were filled in from --{what}"
+            ));
+        }
+        if !implausible.is_empty() {
+            let why = if w == 0 {
+                format!(
+                    "more than {EFFORT_OVER_STANCE} times the {stance_torque:.1} N·m its stance needs"
+                )
+            } else {
+                format!(
+                    "moves the end of its {thigh:.3} m thigh faster than {MAX_THIGH_TIP_SPEED} m/s"
+                )
+            };
+            let used = match fill {
+                Some(f) => format!("using {f} {unit} from --{what}"),
+                None => format!("using {bound} {unit} instead (pass --{what} to choose the value)"),
+            };
+            notes.push(format!(
+                "implausible {what} limits for a {mass:.2} kg robot ({why}): {}; {used}",
+                implausible.join(", ")
+            ));
+        }
+    }
+    if missing.iter().any(|m| !m.is_empty()) {
+        let [effort, velocity] = missing;
+        return Err(AddError::MissingLimits { effort, velocity });
+    }
+    Ok((out[0], out[1]))
 }
 
 /// Per-body joint positions for a canonical-order pose.

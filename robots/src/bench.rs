@@ -16,8 +16,14 @@ use crate::sim::{RobotBinding, SimConfig, SimError, SimWorld};
 use crate::task::{SimState, projected_gravity};
 use crate::vecenv::{StageTimings, VecEnv, VecEnvError};
 
+/// Share of the robot's weight the feet must carry at the settled pose for a robot to stand on
+/// its feet (the rest is carried by other links: shanks, knees, the trunk).
+pub const MIN_FOOT_SHARE: f32 = 0.9;
+/// Seconds at the end of a standing check over which contact forces are averaged.
+const CONTACT_WINDOW_S: f32 = 0.25;
+
 /// Result of a standing check.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 pub struct StandReport {
     /// Base height the pose's kinematics give with the lowest collider on the ground (m).
     pub kinematic_height: f32,
@@ -25,14 +31,76 @@ pub struct StandReport {
     pub settled_height: f32,
     /// z component of gravity in the base frame (−1 = upright).
     pub gravity_z: f32,
-    /// Sum of foot contact forces at the end (N).
+    /// Foot contact force at the end, averaged over the last 0.25 s (N).
     pub foot_force: f32,
+    /// The robot's weight `m·g` (N).
+    pub weight: f32,
+    /// Ground contact force of every other link that touches the ground, averaged as
+    /// `foot_force`, largest first (N).
+    pub other_contacts: Vec<(String, f32)>,
     /// Every state value stayed finite.
     pub finite: bool,
 }
 
+impl StandReport {
+    /// Share of the weight the feet carry (`foot_force / weight`).
+    pub fn foot_share(&self) -> f32 {
+        self.foot_force / self.weight.max(1e-6)
+    }
+
+    /// The feet carry at least [`MIN_FOOT_SHARE`] of the weight.
+    pub fn on_feet(&self) -> bool {
+        self.foot_share() >= MIN_FOOT_SHARE
+    }
+
+    /// `Ok` when the robot (named `name` in the error) stands on its feet, else the error naming
+    /// the links that carry the rest of its weight.
+    pub fn require_on_feet(&self, name: &str) -> Result<(), NotOnFeet> {
+        if self.on_feet() {
+            return Ok(());
+        }
+        Err(NotOnFeet {
+            name: name.to_string(),
+            share: 100.0 * self.foot_share(),
+            min: 100.0 * MIN_FOOT_SHARE,
+            carriers: self.carriers(),
+        })
+    }
+
+    /// The links other than feet that carry weight, with their share: `FL_calf 31% (40.2 N), …`,
+    /// or `nothing else` when only the feet touch the ground.
+    pub fn carriers(&self) -> String {
+        if self.other_contacts.is_empty() {
+            return "nothing else".into();
+        }
+        self.other_contacts
+            .iter()
+            .map(|(l, f)| format!("{l} {:.0}% ({f:.1} N)", 100.0 * f / self.weight.max(1e-6)))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+/// A robot that stands, but not on its feet.
+#[derive(Debug, Clone, thiserror::Error)]
+#[error(
+    "`{name}` does not stand on its feet: they carry {share:.0}% of its weight at the settled pose (at least {min:.0}% needed); the rest is carried by {carriers}\nhint: a collision shape (or a mesh stand-in) that reaches below the feet, or a pose that puts the knees lowest: fix the URDF's <collision> shapes or the default pose"
+)]
+pub struct NotOnFeet {
+    /// Robot name.
+    pub name: String,
+    /// Percent of the weight on the feet.
+    pub share: f32,
+    /// Percent needed ([`MIN_FOOT_SHARE`]).
+    pub min: f32,
+    /// The links that carry the rest ([`StandReport::carriers`]).
+    pub carriers: String,
+}
+
 /// Drops `model` 2 cm above its kinematic standing height at pose `q` (canonical order of
-/// `binding.joints`) on flat ground and holds `q` with `actuator` for `seconds`.
+/// `binding.joints`) on flat ground and holds `q` with `actuator` for `seconds`; ground contact
+/// forces are averaged over the last 0.25 s (or the whole run if shorter), feet (`binding.feet`)
+/// apart from the other links.
 pub fn stand_check(
     model: &RobotModel,
     binding: &RobotBinding,
@@ -66,6 +134,9 @@ pub fn stand_check(
     let mut s = SimState::default();
     let mut finite = true;
     let steps = (seconds / cfg.dt).round() as usize;
+    let window = ((CONTACT_WINDOW_S / cfg.dt).round() as usize).clamp(1, steps.max(1));
+    let mut foot_force = 0.0;
+    let mut others: Vec<(String, f32)> = Vec::new();
     for i in 0..steps {
         if i % 4 == 0 {
             w.clear_contact_maxima();
@@ -73,12 +144,27 @@ pub fn stand_check(
         w.step();
         w.read_state(id, &mut s);
         finite &= s.is_finite();
+        if i + window >= steps {
+            for (link, f) in w.ground_contact_by_link(id) {
+                let f = f / window as f32;
+                if binding.feet.contains(&link) {
+                    foot_force += f;
+                } else if let Some(o) = others.iter_mut().find(|(l, _)| *l == link) {
+                    o.1 += f;
+                } else {
+                    others.push((link, f));
+                }
+            }
+        }
     }
+    others.sort_by(|a, b| b.1.total_cmp(&a.1));
     Ok(StandReport {
         kinematic_height: h,
         settled_height: s.base_pos[2],
         gravity_z: projected_gravity(s.base_quat)[2],
-        foot_force: s.foot_force.iter().sum(),
+        foot_force,
+        weight: model.total_mass() * cfg.gravity,
+        other_contacts: others,
         finite,
     })
 }

@@ -168,6 +168,8 @@ struct RobotInstance {
     feet: [Vec<ColliderHandle>; NUM_FEET],
     penalised: Vec<Vec<ColliderHandle>>,
     termination: Vec<ColliderHandle>,
+    /// Every collider with the URDF link it came from (for [`SimWorld::ground_contact_by_link`]).
+    link_colliders: Vec<(String, ColliderHandle)>,
     actuator: Actuator,
     targets: [f32; NUM_JOINTS],
     /// Targets before the last `set_targets` (applied during the latency).
@@ -522,6 +524,7 @@ impl SimWorld {
             feet,
             penalised,
             termination,
+            link_colliders,
             actuator,
             targets: *q,
             prev_targets: *q,
@@ -735,6 +738,27 @@ impl SimWorld {
             let f = contact_force(&self.world.narrow_phase, &r.termination, dt);
             r.base_force = r.base_force.max(f);
         }
+    }
+
+    /// Ground contact force (N) of robot `robot` in the last physics step, per URDF link that
+    /// touches the ground, in collider order (links without contact are left out).
+    pub fn ground_contact_by_link(&self, robot: usize) -> Vec<(String, f32)> {
+        let mut out: Vec<(String, f32)> = Vec::new();
+        let Some(r) = self.robots.get(robot) else {
+            return out;
+        };
+        let dt = self.cfg.dt;
+        for (link, h) in &r.link_colliders {
+            let f = contact_force(&self.world.narrow_phase, std::slice::from_ref(h), dt);
+            if f <= 0.0 {
+                continue;
+            }
+            match out.iter_mut().find(|(l, _)| l == link) {
+                Some((_, total)) => *total += f,
+                None => out.push((link.clone(), f)),
+            }
+        }
+        out
     }
 
     /// Clears the per-control-step contact maxima (call before the substeps of a control step).

@@ -6,13 +6,18 @@
 //!    uses, with line numbers, and rewrites the document without what makes `urdf-rs` 0.10 fail or
 //!    what it does not need: the second and later `<material>` of a `<visual>` (the current Go2 file
 //!    has several, which urdf-rs rejects with `duplicate field material`), `<gazebo>` and
-//!    `<transmission>` blocks, comments.
+//!    `<transmission>` blocks, comments; a `<limit>` without `velocity` (which urdf-rs requires)
+//!    gets `velocity="0"`, read as no limit.
 //! 2. `urdf-rs` parses the cleaned text.
 //! 3. Links are merged across fixed joints into rigid bodies (masses, centres of mass and inertia
 //!    tensors combined with the parallel-axis rule, colliders re-expressed in the body frame).
-//!    Mesh colliders (`package://` or missing files: this crate reads no meshes) get a box stand-in
-//!    sized from the link's inertia; links without inertia or with zero mass contribute nothing, and
-//!    a moving body left with no mass gets a small placeholder mass (recorded in `warnings`).
+//!    Mesh colliders (`package://` or missing files: this crate reads no meshes) get primitive
+//!    stand-ins, [`MeshStandIn`]: on a leg link, capsules along the link's joint-to-child segments
+//!    with a radius from its inertia, stopping short of a foot's shapes, so that no stand-in hangs
+//!    below the feet; on the trunk and on leaf links (nothing to run a segment to), a box sized
+//!    from the link's inertia. Each replaced mesh is named in `warnings` with its stand-in. Links
+//!    without inertia or with zero mass contribute nothing, and a moving body left with no mass
+//!    gets a small placeholder mass (recorded in `warnings`).
 //!    Continuous joints have no limits. Floating, planar and spherical joints are rejected.
 
 use std::collections::HashMap;
@@ -94,12 +99,105 @@ pub fn load_urdf_file(path: impl AsRef<Path>) -> Result<RobotModel, UrdfError> {
 
 /// Loads a URDF document from text; `file` names it in errors.
 pub fn load_urdf_str(text: &str, file: &str) -> Result<RobotModel, UrdfError> {
+    load_urdf_str_with(text, file, MeshStandIn::default())
+}
+
+/// [`load_urdf_str`] with another rule for the shapes that stand in for meshes.
+pub fn load_urdf_str_with(
+    text: &str,
+    file: &str,
+    stand_in: MeshStandIn,
+) -> Result<RobotModel, UrdfError> {
     let cleaned = prepass(text, file)?;
     let robot = urdf_rs::read_from_string(&cleaned).map_err(|e| UrdfError::Parse {
         file: file.to_string(),
         message: e.to_string(),
     })?;
-    build(&robot, file)
+    build(&robot, file, stand_in)
+}
+
+/// What replaces a mesh collider (this crate reads no meshes).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MeshStandIn {
+    /// On links of moving bodies that have child joints: a capsule along each segment from the
+    /// link's frame (its joint) to a child joint, radius from the link's inertia about the
+    /// segment (a rod's `I = m r² / 2`, at most a quarter of the segment), stopping
+    /// short of a tip's shapes (a child below which no joint moves: a foot) by their extent;
+    /// elsewhere (the trunk, leaf links) the box of [`MeshStandIn::InertiaBox`]. Boxes and
+    /// capsules are shrunk to a plausible density (a 1 g sensor with a large inertia is not a
+    /// large box). Thin capsules on the segments cannot reach below the foot that ends them
+    /// while the leg stands.
+    #[default]
+    Segments,
+    /// A box sized from the link's inertia at its centre of mass, for every mesh. On slender
+    /// shank links (Unitree B1, Solo-12, Mini Cheetah) the box reaches below the foot and the
+    /// robot stands on its shanks: kept to show that.
+    InertiaBox,
+}
+
+/// Lowest density (kg/m³) of a stand-in under [`MeshStandIn::Segments`]: a box or capsule from
+/// inertia is shrunk to this density at the most (A1's `imu_link`, 1 g with the inertia of a
+/// 0.77 m cube, would otherwise be a 0.77 m cube on the trunk; real links are 500–3000).
+const MIN_STAND_IN_DENSITY: f32 = 100.0;
+/// Smallest radius of a capsule stand-in (m).
+const MIN_CAPSULE_RADIUS: f32 = 0.005;
+/// A capsule stand-in's radius is at most its segment's length over this.
+const MAX_CAPSULE_ASPECT: f32 = 4.0;
+
+/// Half extents of the box with mass `m` and inertia diagonal `d` (about its centre), each side
+/// at least 2 cm.
+fn inertia_box_half(m: f32, d: Vec3) -> Vec3 {
+    let side = |a: f32, b: f32, c: f32| ((6.0 * (b + c - a) / m).max(0.0).sqrt()).max(0.02);
+    Vec3::new(
+        side(d.x, d.y, d.z),
+        side(d.y, d.x, d.z),
+        side(d.z, d.x, d.y),
+    ) * 0.5
+}
+
+/// [`inertia_box_half`] shrunk (keeping its proportions) to [`MIN_STAND_IN_DENSITY`] at the most.
+fn dense_box_half(m: f32, d: Vec3) -> Vec3 {
+    let half = inertia_box_half(m, d);
+    let volume = 8.0 * half.x * half.y * half.z;
+    let most = m / MIN_STAND_IN_DENSITY;
+    if volume > most {
+        half * (most / volume).cbrt()
+    } else {
+        half
+    }
+}
+
+/// Radius of a sphere about the shape's frame that holds the shape.
+fn bounding_radius(g: &urdf_rs::Geometry, inertial: &urdf_rs::Inertial) -> f32 {
+    match g {
+        urdf_rs::Geometry::Box { size } => v3(size).length() * 0.5,
+        urdf_rs::Geometry::Sphere { radius } => *radius as f32,
+        urdf_rs::Geometry::Cylinder { radius, length } => {
+            (*radius as f32).hypot(*length as f32 * 0.5)
+        }
+        urdf_rs::Geometry::Capsule { radius, length } => (*radius + *length * 0.5) as f32,
+        // Its stand-in is an inertia box at the centre of mass (a tip is a leaf link).
+        urdf_rs::Geometry::Mesh { .. } => {
+            let m = inertial.mass.value as f32;
+            if m > 0.0 {
+                let i = &inertial.inertia;
+                let d = Vec3::new(i.ixx as f32, i.iyy as f32, i.izz as f32);
+                v3(&inertial.origin.xyz).length() + dense_box_half(m, d).length()
+            } else {
+                0.0
+            }
+        }
+    }
+}
+
+/// One segment a capsule stand-in runs along: from a link's frame to `end` (link frame).
+struct SegmentEnd {
+    end: Vec3,
+    /// Distance from `end` the capsule keeps: the extent of the tip's shapes, 0 when `end` is not
+    /// a tip.
+    clearance: f32,
+    /// The child link at `end`.
+    child: String,
 }
 
 const SKIPPED_TOP_LEVEL: [&str; 2] = ["gazebo", "transmission"];
@@ -140,12 +238,13 @@ fn prepass(text: &str, file: &str) -> Result<String, UrdfError> {
     let mut stack: Vec<(String, usize)> = Vec::new();
     let mut skip_depth = 0usize;
     loop {
-        let ev = reader.next().map_err(|e| UrdfError::Xml {
+        let mut ev = reader.next().map_err(|e| UrdfError::Xml {
             file: file.to_string(),
             line: e.position().row + 1,
             message: e.msg().to_string(),
         })?;
         let line = reader.position().row + 1;
+        let mut no_velocity = false;
         match &ev {
             XmlEvent::EndDocument => break,
             XmlEvent::StartElement {
@@ -186,6 +285,7 @@ fn prepass(text: &str, file: &str) -> Result<String, UrdfError> {
                         .map(|a| a.value.as_str())
                 };
                 validate(&local, parent, &attr, file, line)?;
+                no_velocity = local == "limit" && parent == "joint" && attr("velocity").is_none();
                 stack.push((local, 0));
             }
             XmlEvent::EndElement { .. } => {
@@ -200,6 +300,14 @@ fn prepass(text: &str, file: &str) -> Result<String, UrdfError> {
                     continue;
                 }
             }
+        }
+        // urdf-rs requires `velocity` on a `<limit>`: a missing one is written as 0, which the
+        // model reads as "no velocity limit" (as a missing `effort`).
+        if no_velocity && let XmlEvent::StartElement { attributes, .. } = &mut ev {
+            attributes.push(xml::attribute::OwnedAttribute::new(
+                xml::name::OwnedName::local("velocity"),
+                "0",
+            ));
         }
         if let Some(w) = ev.as_writer_event() {
             writer.write(w).map_err(|e| UrdfError::Xml {
@@ -416,9 +524,14 @@ struct Builder<'a> {
     bodies: Vec<BodySpec>,
     acc: Vec<MassAcc>,
     warnings: Vec<String>,
+    stand_in: MeshStandIn,
 }
 
-fn build(robot: &urdf_rs::Robot, file: &str) -> Result<RobotModel, UrdfError> {
+fn build(
+    robot: &urdf_rs::Robot,
+    file: &str,
+    stand_in: MeshStandIn,
+) -> Result<RobotModel, UrdfError> {
     let structure = |message: String| UrdfError::Structure {
         file: file.to_string(),
         message,
@@ -476,6 +589,7 @@ fn build(robot: &urdf_rs::Robot, file: &str) -> Result<RobotModel, UrdfError> {
         bodies: Vec::new(),
         acc: Vec::new(),
         warnings: Vec::new(),
+        stand_in,
     };
     b.new_body(&robot.links[root].name, None, None);
     b.visit(root, 0, Pose::IDENTITY, 0)?;
@@ -535,6 +649,7 @@ impl<'a> Builder<'a> {
             (lm, lcom, lrot, lin) = (m, ip.translation, ip.rotation, it);
         }
         // Colliders.
+        let mut meshes_replaced = false;
         for col in &link.collision {
             let pose = t * pose_of(&col.origin);
             let shape = match &col.geometry {
@@ -553,17 +668,34 @@ impl<'a> Builder<'a> {
                     radius: *radius as f32,
                 }),
                 urdf_rs::Geometry::Mesh { filename, .. } => {
-                    // No mesh is read: a box with the link's inertia stands in for it.
-                    if lm > 0.0 {
+                    // No mesh is read: primitives stand in for it (see `MeshStandIn`).
+                    let mut segments = match self.stand_in {
+                        MeshStandIn::Segments if body != 0 => {
+                            self.segment_ends(li, Pose::IDENTITY, 0)
+                        }
+                        _ => Vec::new(),
+                    };
+                    segments.retain(|s| s.end.length() >= 1e-3);
+                    if lm <= 0.0 {
+                        self.warnings.push(format!(
+                            "link `{}`: mesh `{filename}` ignored (no inertia to size a stand-in)",
+                            link.name
+                        ));
+                    } else if !segments.is_empty() {
+                        if !meshes_replaced {
+                            self.capsule_stand_ins(
+                                (body, &link.name, t),
+                                filename,
+                                &segments,
+                                (lm, lrot, lin),
+                            );
+                        }
+                    } else {
                         let d = Vec3::new(lin.x_axis.x, lin.y_axis.y, lin.z_axis.z);
-                        let side = |a: f32, b: f32, c: f32| {
-                            ((6.0 * (b + c - a) / lm).max(0.0).sqrt()).max(0.02)
+                        let half = match self.stand_in {
+                            MeshStandIn::Segments => dense_box_half(lm, d),
+                            MeshStandIn::InertiaBox => inertia_box_half(lm, d),
                         };
-                        let half = Vec3::new(
-                            side(d.x, d.y, d.z),
-                            side(d.y, d.x, d.z),
-                            side(d.z, d.x, d.y),
-                        ) * 0.5;
                         self.warnings.push(format!("link `{}`: mesh `{filename}` replaced by a {:.3}x{:.3}x{:.3} m box from its inertia", link.name, half.x * 2.0, half.y * 2.0, half.z * 2.0));
                         let p = t * Pose::from_parts(lcom, lrot);
                         self.bodies[body].colliders.push(ColliderSpec {
@@ -572,12 +704,8 @@ impl<'a> Builder<'a> {
                             link: link.name.clone(),
                             stand_in: true,
                         });
-                    } else {
-                        self.warnings.push(format!(
-                            "link `{}`: mesh `{filename}` ignored (no inertia to size a stand-in)",
-                            link.name
-                        ));
                     }
+                    meshes_replaced |= !segments.is_empty();
                     None
                 }
             };
@@ -648,6 +776,130 @@ impl<'a> Builder<'a> {
             self.visit(ci, nb, Pose::IDENTITY, depth + 1)?;
         }
         Ok(())
+    }
+
+    /// The segments capsule stand-ins of link `li` run along, in the frame of `li` (`t`: the
+    /// frame of the link being searched in it): to each child joint's origin; through a fixed
+    /// joint to a link without collision shapes that has children, on to that link's child
+    /// joints.
+    fn segment_ends(&self, li: usize, t: Pose, depth: usize) -> Vec<SegmentEnd> {
+        let robot = self.robot;
+        let mut out = Vec::new();
+        if depth > 32 {
+            return out;
+        }
+        let kids = self.children.get(robot.links[li].name.as_str());
+        for &ji in kids.into_iter().flatten() {
+            let j = &robot.joints[ji];
+            let origin = t * pose_of(&j.origin);
+            let ci = self.links[j.child.link.as_str()];
+            let child = &robot.links[ci];
+            let fixed = matches!(j.joint_type, urdf_rs::JointType::Fixed);
+            let has_kids = self.children.contains_key(child.name.as_str());
+            if fixed && child.collision.is_empty() && has_kids {
+                out.extend(self.segment_ends(ci, origin, depth + 1));
+                continue;
+            }
+            let clearance = if fixed {
+                self.tip_extent(ci, 0).unwrap_or(0.0)
+            } else {
+                0.0
+            };
+            out.push(SegmentEnd {
+                end: origin.translation,
+                clearance,
+                child: child.name.clone(),
+            });
+        }
+        out
+    }
+
+    /// Radius about link `li`'s frame that holds its shapes and those of the links fixed below
+    /// it; `None` when a joint below it moves (not a tip).
+    fn tip_extent(&self, li: usize, depth: usize) -> Option<f32> {
+        let robot = self.robot;
+        let link = &robot.links[li];
+        if depth > 32 {
+            return None;
+        }
+        let mut extent: f32 = 0.0;
+        for col in &link.collision {
+            let r = bounding_radius(&col.geometry, &link.inertial);
+            extent = extent.max(v3(&col.origin.xyz).length() + r);
+        }
+        for &ji in self.children.get(link.name.as_str()).into_iter().flatten() {
+            let j = &robot.joints[ji];
+            if !matches!(j.joint_type, urdf_rs::JointType::Fixed) {
+                return None;
+            }
+            let ci = self.links[j.child.link.as_str()];
+            let below = self.tip_extent(ci, depth + 1)?;
+            if below > 0.0 {
+                extent = extent.max(v3(&j.origin.xyz).length() + below);
+            }
+        }
+        Some(extent)
+    }
+
+    /// Adds the capsules of [`MeshStandIn::Segments`] for link `link` (frame `t` in body
+    /// `body`) whose mass properties are `(mass, inertia frame, inertia)`, with one warning
+    /// naming them.
+    fn capsule_stand_ins(
+        &mut self,
+        (body, link, t): (usize, &str, Pose),
+        filename: &str,
+        segments: &[SegmentEnd],
+        (m, rot, inertia): (f32, Rot3, Mat3),
+    ) {
+        let r_link = Mat3::from_quat(rot);
+        let inertia = r_link * inertia * r_link.transpose();
+        let mut parts = Vec::new();
+        for seg in segments {
+            let length = seg.end.length();
+            let u = seg.end / length;
+            let axial = u.dot(inertia * u).max(0.0);
+            let room = length - seg.clearance;
+            // At most a quarter of the segment, and no lighter than `MIN_STAND_IN_DENSITY`.
+            let densest = (m / (MIN_STAND_IN_DENSITY * std::f32::consts::PI * length)).sqrt();
+            let radius = (2.0 * axial / m)
+                .sqrt()
+                .min(length / MAX_CAPSULE_ASPECT)
+                .min(densest)
+                .max(MIN_CAPSULE_RADIUS)
+                .min(0.5 * room);
+            if room <= 0.0 || radius <= 0.0 {
+                parts.push(format!(
+                    "nothing towards `{}` (the segment lies within its shapes)",
+                    seg.child
+                ));
+                continue;
+            }
+            // From the joint to `room - radius` along the segment: the end cap reaches `room`.
+            let reach = room - radius;
+            let local = Pose::from_parts(u * (0.5 * reach), Rot3::from_rotation_arc(Vec3::Z, u));
+            self.bodies[body].colliders.push(ColliderSpec {
+                shape: ShapeSpec::Capsule {
+                    half_length: 0.5 * reach,
+                    radius,
+                },
+                pose: t * local,
+                link: link.to_string(),
+                stand_in: true,
+            });
+            let short = if seg.clearance > 0.0 {
+                format!(", stopping {:.3} m short of its shapes", seg.clearance)
+            } else {
+                String::new()
+            };
+            parts.push(format!(
+                "a capsule of radius {radius:.3} m to `{}` ({length:.3} m{short})",
+                seg.child
+            ));
+        }
+        self.warnings.push(format!(
+            "link `{link}`: mesh `{filename}` replaced by capsules along its joint-to-child segments (radius from its inertia): {}",
+            parts.join("; ")
+        ));
     }
 
     fn finish(&mut self) {
