@@ -21,6 +21,16 @@ pub struct EvalArgs {
     /// Terrain preset: flat, simple-rough, curriculum, paper.
     #[arg(long, default_value = "flat")]
     pub terrain: String,
+    /// Only this terrain type in every column (per-terrain skill): pyramid_stairs,
+    /// inverted_pyramid_stairs, boxes, random_rough, pyramid_slope, inverted_pyramid_slope, flat.
+    /// With `--terrain flat` (the default) the `curriculum` preset's tiles are used. Without
+    /// `--level` the curriculum moves levels as in training: the final level is the skill.
+    #[arg(long, value_name = "TYPE")]
+    pub terrain_type: Option<String>,
+    /// Start every env at this terrain level (0 = easiest) and keep it there (curriculum off): the
+    /// falls and tracking at one difficulty.
+    #[arg(long, value_name = "N")]
+    pub level: Option<usize>,
     /// Finished episodes to average over.
     #[arg(long, default_value_t = 64)]
     pub episodes: usize,
@@ -143,6 +153,39 @@ impl PhysicsPins {
 }
 
 /// `--terrain`'s names.
+/// `--terrain-type` and `--level`: one terrain type in every column (on the curriculum preset's
+/// tiles when the preset is flat), every env at one level with the curriculum off.
+fn pin_terrain(
+    terrain: &mut l3p_robots::config::TerrainConfig,
+    kind: Option<&str>,
+    level: Option<usize>,
+) -> anyhow::Result<()> {
+    use l3p_robots::terrain::{TerrainType, TypeProportions};
+    if (kind.is_some() || level.is_some()) && terrain.preset == TerrainPreset::Flat {
+        terrain.preset = TerrainPreset::Curriculum;
+    }
+    if let Some(name) = kind {
+        let kind = TerrainType::from_name(name).ok_or_else(|| {
+            anyhow::anyhow!(
+                "unknown terrain type {name}\nhint: one of {}",
+                TerrainType::names()
+            )
+        })?;
+        terrain.proportions = Some(TypeProportions::only(kind));
+    }
+    if let Some(level) = level {
+        if level >= terrain.num_rows {
+            anyhow::bail!(
+                "--level {level}: the terrain has levels 0..={}",
+                terrain.num_rows - 1
+            );
+        }
+        terrain.init_level = Some(level);
+        terrain.curriculum = Some(false);
+    }
+    Ok(())
+}
+
 pub fn terrain_preset(name: &str) -> anyhow::Result<TerrainPreset> {
     Ok(match name {
         "flat" => TerrainPreset::Flat,
@@ -295,6 +338,11 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     crate::robots_cmd::load_added_robots(Some(&args.data_dir));
     let policy = load_policy(&args.policy, &args.data_dir)?;
     config.env.terrain.preset = terrain_preset(&args.terrain)?;
+    pin_terrain(
+        &mut config.env.terrain,
+        args.terrain_type.as_deref(),
+        args.level,
+    )?;
     // A blind policy runs without the height scan (evaluate_row applies the whole contract).
     config.env =
         l3p_robots::io::env_for_policy(&config.env, policy.obs_dim(), policy.config.io.as_ref());
@@ -344,6 +392,8 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             "policy": args.policy,
             "robot": robot.name,
             "terrain": args.terrain,
+            "terrain_type": args.terrain_type,
+            "level": args.level,
             "heading_hold": args.heading_hold,
             "mirrored": args.mirrored,
             "pins": {

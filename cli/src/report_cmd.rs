@@ -1,5 +1,6 @@
 //! `l3p report <run> [<run>…]`: training curves as SVG and PNG (one run under its directory, several
-//! overlaid) and the paper-style row per run.
+//! overlaid), on terrain the level per terrain type (`terrain_level_by_type`, one line per type),
+//! and the paper-style row per run.
 
 use std::path::PathBuf;
 
@@ -94,6 +95,32 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
             println!("wrote {}", file.display());
         }
     }
+    let by_type = terrain_level_by_type(&runs, args.window);
+    if !by_type.is_empty() {
+        let label = "terrain level";
+        let title = format!(
+            "{title} — terrain level by type (smoothed over {} iterations)",
+            args.window
+        );
+        let svg = svg_bands(&title, label, &by_type);
+        let png = png_bands(&title, label, &by_type);
+        for (ext, bytes) in [("svg", svg.into_bytes()), ("png", png)] {
+            let file = out.join(format!("terrain_level_by_type.{ext}"));
+            std::fs::write(&file, bytes)?;
+            println!("wrote {}", file.display());
+        }
+        println!();
+        println!(
+            "| run, terrain type | final level (mean of the last {} iterations) |",
+            args.window
+        );
+        println!("|---|---|");
+        for (name, line) in &by_type {
+            if let Some(&(_, level, _, _)) = line.last() {
+                println!("| {name} | {level:.2} |");
+            }
+        }
+    }
     let it = |v: Option<u64>| v.map(|v| v.to_string()).unwrap_or_else(|| "—".into());
     println!();
     println!(
@@ -117,4 +144,56 @@ pub fn run(args: ReportArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// One smoothed line per run and terrain type from the learner's `terrain_level/type<k>` metrics
+/// (k indexes `TerrainType::ALL`), named by the type (and the run when there are several).
+fn terrain_level_by_type(
+    runs: &[(&str, Vec<l3p_proto::MetricsRecord>)],
+    window: usize,
+) -> Vec<(String, Vec<(f64, f64, f64, f64)>)> {
+    let mut lines = Vec::new();
+    for (run, records) in runs {
+        for (k, kind) in l3p_robots::terrain::TerrainType::ALL.iter().enumerate() {
+            let raw = series(records, &format!("terrain_level/type{k}"));
+            if raw.is_empty() {
+                continue;
+            }
+            let name = match runs.len() {
+                1 => kind.as_str().to_string(),
+                _ => format!("{run} {}", kind.as_str()),
+            };
+            let line = smooth(&raw, window)
+                .into_iter()
+                .map(|(x, y)| (x, y, y, y))
+                .collect();
+            lines.push((name, line));
+        }
+    }
+    lines
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use l3p_proto::MetricsRecord;
+
+    #[test]
+    fn terrain_levels_chart_one_line_per_type_seen() {
+        let records: Vec<MetricsRecord> = (0..4)
+            .map(|i| {
+                let mut r = MetricsRecord::new("rough", "learner", i, 0);
+                r.insert("terrain_level/type1", 1.0 + i as f64);
+                r.insert("terrain_level/type4", 0.5);
+                r
+            })
+            .collect();
+        let lines = terrain_level_by_type(&[("rough", records.clone())], 1);
+        let names: Vec<_> = lines.iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(names, ["pyramid_stairs", "random_rough"]);
+        assert_eq!(lines[0].1.last().unwrap().1, 4.0);
+        let two = terrain_level_by_type(&[("a", records.clone()), ("b", records)], 1);
+        assert_eq!(two.len(), 4);
+        assert_eq!(two[2].0, "b pyramid_stairs");
+    }
 }

@@ -114,6 +114,60 @@ envs = 4
     assert!(stdout.contains("xy-velocity tracking error"), "{stdout}");
     assert!(stdout.contains("base height above ground"), "{stdout}");
 
+    // Per-terrain skill: one type in every column, every env held at one level.
+    let small = dir.path().join("small-terrain.toml");
+    std::fs::write(
+        &small,
+        "[env.terrain]\nnum_rows = 4\nmax_init_level = 3\nnum_cols = 2\nborder_width = 1.0\nvertical_faces = true\n",
+    )
+    .unwrap();
+    let pinned = |kind: &str, level: &str| {
+        l3p(&[
+            "eval",
+            "--policy",
+            "local-a1@latest",
+            "--data-dir",
+            data_arg,
+            "--robot",
+            "a1",
+            "--config",
+            small.to_str().unwrap(),
+            "--terrain-type",
+            kind,
+            "--level",
+            level,
+            "--episodes",
+            "2",
+            "--envs",
+            "2",
+            "--json",
+        ])
+    };
+    let out = pinned("pyramid_stairs", "3");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(json["terrain_type"], "pyramid_stairs", "{json}");
+    assert_eq!(
+        json["rows"][0]["terrain_level"], 3.0,
+        "held at level 3: {json}"
+    );
+    let out = pinned("pyramid_stairs", "4");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("levels 0..=3"),
+        "{stderr}"
+    );
+    let out = pinned("stairs", "1");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        !out.status.success() && stderr.contains("inverted_pyramid_stairs"),
+        "{stderr}"
+    );
+
     let out = l3p(&["report", "local", "--data-dir", data_arg]);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(

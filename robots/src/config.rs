@@ -136,6 +136,9 @@ pub struct TerrainConfig {
     pub border_width: f32,
     /// Initial levels are drawn from `0..=max_init_level`. IsaacLab: 5.
     pub max_init_level: usize,
+    /// Every env starts at this level instead (with `curriculum = false` it stays there: `l3p eval
+    /// --level`, a policy's skill at one difficulty).
+    pub init_level: Option<usize>,
     /// Seed of the terrain generator (boxes, rough noise, per-tile difficulty jitter).
     pub seed: u64,
     /// Override of the stairs (both kinds) step-height range `[lo, hi]` in metres.
@@ -174,6 +177,7 @@ impl Default for TerrainConfig {
             horizontal_resolution: 0.05,
             border_width: 20.0,
             max_init_level: 5,
+            init_level: None,
             seed: 0,
             stairs_step_height: None,
             boxes_height: None,
@@ -256,6 +260,7 @@ impl TerrainConfig {
             horizontal_resolution: self.horizontal_resolution,
             border_width: self.border_width,
             max_init_level: self.max_init_level,
+            init_level: self.init_level,
             seed: self.seed,
             curriculum,
             proportions,

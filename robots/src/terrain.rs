@@ -263,6 +263,8 @@ pub struct TerrainSpec {
     pub horizontal_resolution: f32,
     pub border_width: f32,
     pub max_init_level: usize,
+    /// Every env starts at this level (see `TerrainConfig::init_level`).
+    pub init_level: Option<usize>,
     pub seed: u64,
     /// Whether the terrain-level curriculum moves envs between levels.
     pub curriculum: bool,
@@ -315,6 +317,14 @@ impl TerrainSpec {
             return Err(bad(
                 "border_width",
                 format!("expected a finite width >= 0, got {}", self.border_width),
+            ));
+        }
+        if let Some(level) = self.init_level
+            && level >= self.num_rows
+        {
+            return Err(bad(
+                "init_level",
+                format!("expected < num_rows ({}), got {level}", self.num_rows),
             ));
         }
         if self.max_init_level >= self.num_rows {
@@ -1028,12 +1038,15 @@ pub struct Curriculum {
 }
 
 impl Curriculum {
-    /// IsaacLab `_compute_env_origins_curriculum`: levels `U{0..=max_init_level}`, column
-    /// `floor(i · num_cols / num_envs)`.
+    /// IsaacLab `_compute_env_origins_curriculum`: levels `U{0..=max_init_level}` (or every env
+    /// at `init_level`), column `floor(i · num_cols / num_envs)`.
     pub fn new<R: Rng + ?Sized>(num_envs: usize, spec: &TerrainSpec, rng: &mut R) -> Curriculum {
         let max_init = spec.max_init_level.min(spec.num_rows.saturating_sub(1));
         let levels = (0..num_envs)
-            .map(|_| rng.random_range(0..=max_init))
+            .map(|_| match spec.init_level {
+                Some(level) => level,
+                None => rng.random_range(0..=max_init),
+            })
             .collect();
         let cols = (0..num_envs)
             .map(|i| (i * spec.num_cols / num_envs.max(1)).min(spec.num_cols - 1))
