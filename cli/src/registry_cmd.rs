@@ -140,7 +140,9 @@ pub enum RegistryCommand {
         target: Target,
     },
     /// Remove old checkpoint versions: keep the newest --keep of each checkpoint, every aliased
-    /// version, every lineage parent of a kept version and every version of other kinds.
+    /// version, every lineage parent of a kept version and every version of other kinds. A deploy
+    /// artifact's edge to the checkpoint it was exported from does not keep that checkpoint (the
+    /// edge goes with it).
     Gc {
         /// Data directory holding registry.db (opened directly; safe next to a running service).
         #[arg(long, visible_alias = "data-dir", default_value = "l3p-data")]
@@ -427,6 +429,13 @@ fn print_gc(path: &Path, r: &GcReport) {
         "{verb} {} versions, {} lineage rows, {} blobs ({} bytes of blobs)",
         r.versions_removed, r.lineage_removed, r.blobs_removed, r.blob_bytes_removed
     );
+    if r.lineage_cut > 0 {
+        println!(
+            "({} of those lineage rows are kept deploy artifacts' edges to the checkpoints they \
+             were exported from)",
+            r.lineage_cut
+        );
+    }
     if r.dry_run {
         println!("database file: {} bytes (unchanged)", r.file_bytes_before);
     } else {

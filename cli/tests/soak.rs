@@ -17,6 +17,14 @@
 //! kernel has it, else with `tc tbf` (a slow link with a bounded queue: netem is missing on the
 //! project's CI machines); the test reports which. `L3P_SOAK_REPORT=<file>`
 //! writes the figures as JSON (BENCHMARKS.md "Multi-host soak").
+//!
+//! Resources (issue 46): every `L3P_SOAK_SAMPLE_S` (default: 30 samples over the soak, 5–60 s
+//! apart) the resident memory, open descriptors and threads of every process and the size of the
+//! data directory and the registry database are sampled (`soak/resources.rs`); any process that
+//! lived ten minutes must not grow faster than `Limits::SOAK` per hour (so the one-hour soak,
+//! `L3P_SOAK_SECONDS=3600`, judges the router and every long-lived incarnation). At the end the
+//! registry is garbage-collected (newest 5 checkpoints kept): integrity, the newest checkpoint and
+//! the size before and after are checked and reported.
 
 use std::collections::BTreeMap;
 use std::io::Write as _;
@@ -25,6 +33,8 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
+#[path = "soak/resources.rs"]
+mod resources;
 
 use common::{TINY_FLAT_TASK, log_tails};
 use l3p_proto::MetricsRecord;
@@ -204,6 +214,8 @@ struct Procs {
     hosts: Hosts,
     dir: PathBuf,
     running: Vec<(String, Child)>,
+    /// The running processes' pids, for the resource sampler.
+    pids: resources::Pids,
 }
 
 impl Procs {
@@ -225,12 +237,18 @@ impl Procs {
             .stderr(log)
             .spawn()
             .unwrap();
+        // `ip netns exec` execs the command: the child's pid is l3p's.
+        self.pids
+            .lock()
+            .unwrap()
+            .insert(name.to_string(), child.id());
         self.running.push((name.to_string(), child));
     }
 
     fn signal(&mut self, name: &str, signal: &str) -> Option<std::process::ExitStatus> {
         let pos = self.running.iter().position(|(n, _)| n == name)?;
         let (_, mut child) = self.running.remove(pos);
+        self.pids.lock().unwrap().remove(name);
         let _ = Command::new("kill")
             .args([signal, &child.id().to_string()])
             .status();
@@ -654,6 +672,7 @@ connect = ["{link}/{router}:7447"]
         hosts,
         dir: dir.to_path_buf(),
         running: Vec::new(),
+        pids: Default::default(),
     };
     let router_toml = router_toml.to_string_lossy().into_owned();
     procs.spawn("router", "router", &["router", "--config", &router_toml]);
@@ -694,6 +713,19 @@ connect = ["{link}/{router}:7447"]
         "at start-up",
     );
     eprintln!("training through the router after {first_s:.1} s");
+    // Resources of every process and the data's size, every `L3P_SOAK_SAMPLE_S` (default: 30
+    // samples over the soak, 5-60 s apart).
+    let sample_every =
+        Duration::from_secs(env_seconds("L3P_SOAK_SAMPLE_S", (soak_s / 30).clamp(5, 60)));
+    let sampler = resources::Sampler::start(
+        procs.pids.clone(),
+        vec![
+            ("data".into(), data.clone()),
+            ("registry".into(), data.join("registry.db")),
+            ("registry_wal".into(), data.join("registry.db-wal")),
+        ],
+        sample_every,
+    );
 
     // Peers the router must refuse: another CA's certificate, and plain TCP. The same command from
     // the same host with a certificate of the run's CA works (so a refusal is the router's doing).
@@ -908,6 +940,7 @@ connect = ["{link}/{router}:7447"]
     for name in ["actor-a", "actor-b", "registry", "router"] {
         procs.signal(name, "-TERM");
     }
+    let (process_samples, disk_samples) = sampler.finish();
     // No process outlives the soak in any namespace.
     std::thread::sleep(Duration::from_millis(500));
     for ns in procs.hosts.all_ns() {
@@ -946,6 +979,76 @@ connect = ["{link}/{router}:7447"]
         "the final checkpoint ({iterations:?}) reached the registry (learner at {final_iteration})"
     );
 
+    // Resources: no unbounded growth in any process that lived long enough to judge (Limits::SOAK:
+    // ten minutes; the router lives through the whole soak).
+    let growths = resources::growth(&process_samples, 6);
+    for g in &growths {
+        eprintln!(
+            "{:<9} pid {:>7} {:<8} {:>8.1} -> {:>8.1} over {:>5.0} s ({} samples), {:>+8.2} per hour",
+            g.name, g.pid, g.resource, g.first, g.last, g.span_s, g.samples, g.per_hour
+        );
+    }
+    let breaches = resources::Limits::SOAK.breaches(&growths);
+    assert!(
+        breaches.is_empty(),
+        "resources grow without bound: {breaches:#?} (limits {:?})",
+        resources::Limits::SOAK
+    );
+    let disk: BTreeMap<String, serde_json::Value> = disk_samples
+        .first()
+        .map(|first| {
+            first
+                .bytes
+                .keys()
+                .map(|label| {
+                    let points: Vec<(f64, f64)> = disk_samples
+                        .iter()
+                        .map(|d| (d.t_s, d.bytes[label] as f64))
+                        .collect();
+                    let value = serde_json::json!({
+                        "first_bytes": points.first().map(|p| p.1),
+                        "last_bytes": points.last().map(|p| p.1),
+                        "per_hour_bytes": resources::slope(&points) * 3600.0,
+                    });
+                    (label.clone(), value)
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    eprintln!("disk: {disk:?}");
+
+    // Retention: keep the newest 5 checkpoints (and what aliases and lineage need); the blobs of the
+    // rest are freed, the latest checkpoint and every deploy artifact stay.
+    let gc = registry
+        .gc(&l3p_registry::RetentionPolicy { keep_last: 5 }, false)
+        .unwrap();
+    let integrity = registry.check_integrity().unwrap();
+    assert!(integrity.is_ok(), "after gc: {integrity:?}");
+    let kept = registry
+        .list(&l3p_registry::ListFilter {
+            name: Some(format!("{RUN}-checkpoint")),
+            ..Default::default()
+        })
+        .unwrap();
+    assert!(
+        kept.len() <= 5 + gc.kept_because.len() && !kept.is_empty(),
+        "{} checkpoints after gc: {gc:?}",
+        kept.len()
+    );
+    assert_eq!(
+        kept.last().map(|m| m.version),
+        versions.last().map(|m| m.version),
+        "the newest checkpoint survives gc"
+    );
+    eprintln!(
+        "registry gc: {} versions removed, {} blobs ({} bytes), file {} -> {} bytes",
+        gc.versions_removed,
+        gc.blobs_removed,
+        gc.blob_bytes_removed,
+        gc.file_bytes_before,
+        gc.file_bytes_after
+    );
+
     eprintln!(
         "soak: {n} faults in {:.0} s {:?}, recovery seconds {:?}, learner iterations lost per kill {:?}, \
          {} checkpoint versions, integrity ok",
@@ -965,6 +1068,17 @@ connect = ["{link}/{router}:7447"]
             "final_iteration": final_iteration,
             "netem": figures.netem,
             "seed": seed,
+            "sample_every_s": sample_every.as_secs(),
+            "resources": growths,
+            "disk": disk,
+            "registry_gc": {
+                "keep_last": 5,
+                "versions_removed": gc.versions_removed,
+                "blobs_removed": gc.blobs_removed,
+                "blob_bytes_removed": gc.blob_bytes_removed,
+                "file_bytes_before": gc.file_bytes_before,
+                "file_bytes_after": gc.file_bytes_after,
+            },
         });
         let mut file = std::fs::File::create(path).unwrap();
         writeln!(file, "{}", serde_json::to_string_pretty(&report).unwrap()).unwrap();

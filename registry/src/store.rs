@@ -188,8 +188,11 @@ pub struct GcReport {
     /// Checkpoint versions older than the newest `keep_last` that an alias or lineage kept.
     pub kept_because: Vec<KeptVersion>,
     pub versions_removed: usize,
-    /// Lineage rows of removed versions (a removed version is never a kept version's parent).
+    /// Lineage rows of removed versions, and those of kept deploy artifacts naming a removed
+    /// checkpoint as the one they were exported from (the only parent gc may remove).
     pub lineage_removed: usize,
+    /// Of those, the edges of kept deploy artifacts to removed checkpoints.
+    pub lineage_cut: usize,
     /// Blobs no remaining version references.
     pub blobs_removed: usize,
     /// Sum of the removed blobs' sizes.
@@ -692,6 +695,7 @@ impl Registry {
             kept_because: plan.kept_because,
             versions_removed: plan.removed.len(),
             lineage_removed: plan.lineage_removed,
+            lineage_cut: plan.lineage_cut,
             blobs_removed: plan.blobs.len(),
             blob_bytes_removed: plan.blob_bytes,
             file_bytes_before,
@@ -711,13 +715,31 @@ impl Registry {
             let mut drop_lineage = tx
                 .prepare("DELETE FROM lineage WHERE name = ?1 AND version = ?2")
                 .map_err(sql("removing lineage"))?;
+            // A kept deploy artifact's edge to the checkpoint it was exported from (see `plan_gc`);
+            // no other edge to a removed version may exist.
+            let mut cut_lineage = tx
+                .prepare(
+                    "DELETE FROM lineage WHERE parent_name = ?1 AND parent_version = ?2 \
+                     AND role = 'from_checkpoint' AND EXISTS (SELECT 1 FROM versions v \
+                     WHERE v.name = lineage.name AND v.version = lineage.version \
+                     AND v.kind = 'deploy')",
+                )
+                .map_err(sql("removing lineage"))?;
             let mut drop_version = tx
                 .prepare("DELETE FROM versions WHERE name = ?1 AND version = ?2")
                 .map_err(sql("removing versions"))?;
+            // Edges first (a removed parent may sort before its removed child), then versions.
             for (name, version) in &plan.removed {
                 lineage_removed += drop_lineage
                     .execute(params![name, *version as i64])
                     .map_err(sql("removing lineage"))?;
+            }
+            for (name, version) in &plan.removed {
+                lineage_removed += cut_lineage
+                    .execute(params![name, *version as i64])
+                    .map_err(sql("removing lineage"))?;
+            }
+            for (name, version) in &plan.removed {
                 // `foreign_keys` is on: deleting a version some remaining lineage row names as its
                 // parent fails here, so lineage can never be left dangling.
                 drop_version
@@ -813,6 +835,7 @@ struct GcPlan {
     /// `(name, version)` of every version to remove.
     removed: Vec<(String, u64)>,
     lineage_removed: usize,
+    lineage_cut: usize,
     /// sha256 of every blob no kept version references.
     blobs: Vec<String>,
     blob_bytes: u64,
@@ -890,15 +913,23 @@ fn plan_gc(conn: &Connection, keep_last: u64) -> Result<GcPlan, StoreError> {
         .map_err(sql("planning gc"))?
         .collect::<Result<Vec<_>, _>>()
         .map_err(sql("planning gc"))?;
+    let kinds: BTreeMap<Key, ArtifactKind> = versions
+        .iter()
+        .map(|(name, version, kind, _)| ((name.clone(), *version), *kind))
+        .collect();
     let mut parents: BTreeMap<Key, Vec<(LineageRole, Key)>> = BTreeMap::new();
-    let mut lineage_rows: BTreeMap<Key, usize> = BTreeMap::new();
+    let mut all_edges: Vec<(Key, Key)> = Vec::new();
     for (name, version, role, parent, parent_version) in edges {
         let role: LineageRole = role.parse().map_err(|e| corrupt("lineage role", e))?;
-        *lineage_rows.entry((name.clone(), version)).or_default() += 1;
-        parents
-            .entry((name, version))
-            .or_default()
-            .push((role, (parent, parent_version)));
+        let (child, parent) = ((name, version), (parent, parent_version));
+        all_edges.push((child.clone(), parent.clone()));
+        // A deploy artifact is self-contained: the checkpoint it was exported from does not have
+        // to outlive it (every run uploads one with each registry checkpoint, so that edge would
+        // keep every checkpoint). Its edge goes with the checkpoint; every other role pins.
+        if role == LineageRole::FromCheckpoint && kinds.get(&child) == Some(&ArtifactKind::Deploy) {
+            continue;
+        }
+        parents.entry(child).or_default().push((role, parent));
     }
     let mut queue: VecDeque<Key> = kept.iter().cloned().collect();
     while let Some(child) = queue.pop_front() {
@@ -935,10 +966,15 @@ fn plan_gc(conn: &Connection, keep_last: u64) -> Result<GcPlan, StoreError> {
             removed.push(key);
         }
     }
-    let lineage_removed = removed
+    let gone: BTreeSet<&Key> = removed.iter().collect();
+    let lineage_removed = all_edges
         .iter()
-        .map(|key| lineage_rows.get(key).copied().unwrap_or(0))
-        .sum();
+        .filter(|(child, parent)| gone.contains(child) || gone.contains(parent))
+        .count();
+    let lineage_cut = all_edges
+        .iter()
+        .filter(|(child, parent)| !gone.contains(child) && gone.contains(parent))
+        .count();
 
     let mut stmt = conn
         .prepare("SELECT sha256, size FROM blobs ORDER BY sha256")
@@ -962,6 +998,7 @@ fn plan_gc(conn: &Connection, keep_last: u64) -> Result<GcPlan, StoreError> {
         kept_because,
         removed,
         lineage_removed,
+        lineage_cut,
         blobs,
         blob_bytes,
     })

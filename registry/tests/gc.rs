@@ -309,3 +309,51 @@ fn open_existing_refuses_a_missing_or_corrupt_database() {
     let err = Registry::open_existing(dir.path()).unwrap_err();
     assert!(err.to_string().contains("not a database"), "{err}");
 }
+
+/// A training run uploads a deploy artifact with every registry checkpoint, its lineage naming the
+/// checkpoint it was exported from. Every deploy artifact stays, but that edge does not keep the
+/// checkpoint: gc removes the old checkpoints (the soak's 195 versions were all kept before) and
+/// the edges to them, leaving no lineage row dangling. A checkpoint resumed from another still
+/// keeps it.
+#[test]
+fn deploy_artifacts_stay_without_pinning_the_checkpoints_they_came_from() {
+    let dir = tempfile::tempdir().unwrap();
+    let reg = Registry::open(dir.path()).unwrap();
+    for i in 1..=10 {
+        reg.put(checkpoint("run-checkpoint", i)).unwrap();
+        reg.put(
+            PutRequest::new("run-a1", ArtifactKind::Deploy, blob("deploy", i))
+                .robot("a1")
+                .lineage(LineageRole::FromCheckpoint, &format!("run-checkpoint@{i}")),
+        )
+        .unwrap();
+    }
+    // Another run resumed from an older checkpoint: that one must stay.
+    reg.put(checkpoint("resumed", 1).lineage(LineageRole::FromCheckpoint, "run-checkpoint@2"))
+        .unwrap();
+    let report = reg.gc(&keep(3), false).unwrap();
+    assert_eq!(versions_of(&reg, "run-checkpoint"), [2, 8, 9, 10]);
+    assert_eq!(versions_of(&reg, "run-a1"), (1..=10).collect::<Vec<_>>());
+    assert_eq!(report.versions_removed, 6);
+    assert_eq!(
+        (report.lineage_removed, report.lineage_cut),
+        (6, 6),
+        "the edges of run-a1@1,3,4,5,6,7"
+    );
+    let upstream = |r: &str| -> Vec<String> {
+        reg.lineage(r)
+            .unwrap()
+            .upstream
+            .iter()
+            .map(|l| l.parent.clone())
+            .collect()
+    };
+    assert!(upstream("run-a1@4").is_empty());
+    assert_eq!(upstream("run-a1@9"), ["run-checkpoint@9"]);
+    assert_eq!(upstream("run-a1@2"), ["run-checkpoint@2"]);
+    assert_eq!(upstream("resumed@1"), ["run-checkpoint@2"]);
+    let integrity = reg.check_integrity().unwrap();
+    assert!(integrity.is_ok(), "{integrity:?}");
+    assert_eq!(reg.get_blob("run-a1@1").unwrap().1, blob("deploy", 1));
+    assert_triggers_guard_versions(reg.path());
+}
