@@ -12,6 +12,10 @@ mod logging;
 #[derive(Debug, Parser)]
 #[command(name = "l3p", version, about, long_about = None, propagate_version = true)]
 struct Cli {
+    /// On failure, print the error's causes one per line with a stack backtrace (as does
+    /// RUST_LIB_BACKTRACE=1).
+    #[arg(short, long, global = true)]
+    verbose: bool,
     #[command(subcommand)]
     command: Command,
 }
@@ -63,6 +67,15 @@ fn main() -> ExitCode {
     keep_large_allocations_on_the_heap();
     logging::init();
     let cli = Cli::parse();
+    let verbose = cli.verbose || l3p_cli::runtime::lib_backtrace_asked();
+    if cli.verbose {
+        // SAFETY: nothing has started another thread yet (logging set-up starts none), so no
+        // concurrent reader of the environment exists; anyhow reads it when it captures a backtrace.
+        #[allow(unsafe_code)]
+        unsafe {
+            std::env::set_var("RUST_LIB_BACKTRACE", "1");
+        }
+    }
     // Robots added with `l3p robots add` ($L3P_ROBOTS_DIR, else ./l3p-data/robots).
     l3p_cli::robots_cmd::load_added_robots(None);
     match run(cli.command) {
@@ -72,9 +85,8 @@ fn main() -> ExitCode {
                 eprintln!("{interrupted}");
                 ExitCode::from(130)
             }
-            // As `main` returning the error would print it (with a backtrace when asked for).
             None => {
-                eprintln!("Error: {e:?}");
+                eprintln!("{}", l3p_cli::runtime::error_report(&e, verbose));
                 ExitCode::FAILURE
             }
         },

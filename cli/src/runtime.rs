@@ -63,6 +63,24 @@ impl std::fmt::Display for Interrupted {
 
 impl std::error::Error for Interrupted {}
 
+/// Whether `RUST_LIB_BACKTRACE` asks for error backtraces (set and not `0`, as std reads it).
+/// `RUST_BACKTRACE` alone does not: it is for panics, and CI sets it for every command.
+pub fn lib_backtrace_asked() -> bool {
+    std::env::var_os("RUST_LIB_BACKTRACE").is_some_and(|v| v != "0")
+}
+
+/// A failed command's error as `main` prints it: `error: ` and the chain of causes on one line
+/// (`context: cause: …`, hint lines as the messages hold them); `verbose` (`-v`, or
+/// `RUST_LIB_BACKTRACE`) adds anyhow's full report — the causes one per line and the stack
+/// backtrace when one was captured.
+pub fn error_report(error: &anyhow::Error, verbose: bool) -> String {
+    if verbose {
+        format!("error: {error:?}")
+    } else {
+        format!("error: {error:#}")
+    }
+}
+
 /// A multi-threaded tokio runtime for Zenoh and the daemon loops (heavy work runs on blocking threads).
 pub fn tokio_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
     Ok(tokio::runtime::Builder::new_multi_thread()
@@ -196,4 +214,25 @@ pub fn configured_robots(config: &Config) -> anyhow::Result<Vec<&'static Robot>>
         anyhow::bail!("the config lists no [[actors]]\nhint: add e.g. [[actors]] robot = \"a1\"");
     }
     Ok(robots)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_error_prints_its_chain_and_hint_without_a_backtrace_unless_verbose() {
+        let error = anyhow::anyhow!("leg joints without limits\nhint: add <limit/>")
+            .context("adding lab_dog.urdf");
+        let short = error_report(&error, false);
+        assert_eq!(
+            short,
+            "error: adding lab_dog.urdf: leg joints without limits\nhint: add <limit/>"
+        );
+        let long = error_report(&error, true);
+        assert!(
+            long.starts_with("error: adding lab_dog.urdf") && long.contains("Caused by:"),
+            "{long}"
+        );
+    }
 }

@@ -1,4 +1,5 @@
 //! `l3p --help` lists exactly the commands that exist, and every command's help renders.
+//! A failed command prints `error:` and its chain of causes, a backtrace only when asked for.
 
 use std::process::Command;
 
@@ -90,5 +91,52 @@ fn closed_stdout_is_not_a_panic() {
         matches!(out.status.code(), Some(0 | 141)),
         "{:?}",
         out.status
+    );
+}
+
+/// A URDF whose leg joints have no effort limits fails `l3p robots add` with its hint; CI's
+/// `RUST_BACKTRACE=1` (meant for panics) does not add a stack backtrace, `-v` does.
+#[test]
+fn an_error_prints_its_chain_and_a_backtrace_only_when_asked() {
+    let dir = tempfile::tempdir().unwrap();
+    let urdf = l3p_robots::catalog::RobotSpec::by_name("a1")
+        .unwrap()
+        .urdf
+        .split(" effort=\"")
+        .enumerate()
+        .map(|(i, part)| match i {
+            0 => part,
+            // Drop the attribute's value and its closing quote.
+            _ => part.split_once('"').map_or(part, |(_, rest)| rest),
+        })
+        .collect::<String>();
+    std::fs::write(dir.path().join("no_limits.urdf"), urdf).unwrap();
+    let add = |extra: &[&str]| {
+        let out = Command::new(env!("CARGO_BIN_EXE_l3p"))
+            .args(["robots", "add", "no_limits.urdf", "--name", "no_limits"])
+            .args(extra)
+            .current_dir(dir.path())
+            .env_remove("L3P_ROBOTS_DIR")
+            .env_remove("RUST_LIB_BACKTRACE")
+            .env("RUST_BACKTRACE", "1")
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let err = add(&[]);
+    assert!(
+        err.lines().any(|l| l.starts_with("error: "))
+            && err.contains("without limits")
+            && err.contains("\nhint: "),
+        "{err}"
+    );
+    assert!(!err.to_lowercase().contains("backtrace"), "{err}");
+    let err = add(&["-v"]);
+    assert!(
+        err.lines().any(|l| l.starts_with("error: "))
+            && err.contains("\nhint: ")
+            && err.contains("Stack backtrace"),
+        "{err}"
     );
 }

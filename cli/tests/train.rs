@@ -248,6 +248,8 @@ fn killed_train_leaves_no_orphan_actor() {
     let mut train = Command::new(env!("CARGO_BIN_EXE_l3p"))
         .args(["train", config.to_str().unwrap(), "--quiet", "--data-dir"])
         .arg(dir.path().join("data"))
+        // The actors share this stderr; their "ready" line is the cue below.
+        .env_remove("RUST_LOG")
         .stdout(std::process::Stdio::null())
         .stderr(std::fs::File::create(dir.path().join("train.err")).unwrap())
         .spawn()
@@ -266,8 +268,15 @@ fn killed_train_leaves_no_orphan_actor() {
         );
         std::thread::sleep(Duration::from_millis(100));
     };
-    // Let the actor get going (connected, collecting) before the parent dies.
-    std::thread::sleep(Duration::from_secs(2));
+    // Let the actor get going (connected, its loop running) before the parent dies.
+    while !log().contains("actor ready, waiting for a policy") {
+        assert!(
+            Instant::now() < deadline,
+            "the actor never got ready; the log says:\n{}",
+            log()
+        );
+        std::thread::sleep(Duration::from_millis(100));
+    }
     train.kill().unwrap();
     train.wait().unwrap();
     let deadline = Instant::now() + Duration::from_secs(30);

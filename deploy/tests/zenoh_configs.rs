@@ -450,6 +450,15 @@ fn received(sub: &Sub, expect: &str, deadline: Duration) -> BTreeSet<String> {
     got
 }
 
+/// Polls `condition` every 20 ms until it holds; panics naming `what` after 10 s.
+fn wait_until(what: &str, mut condition: impl FnMut() -> bool) {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while !condition() {
+        assert!(Instant::now() < deadline, "timed out waiting until {what}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
 /// Number of replies a query gets.
 fn replies(session: &Session, key: &str) -> usize {
     let replies = session
@@ -518,8 +527,45 @@ fn acl_router_enforces_writers_over_mutual_tls() {
         })
         .wait()
         .unwrap();
-    // Let the declarations reach every client through the router.
-    std::thread::sleep(Duration::from_secs(1));
+    // Wait until the declarations reached every client through the router: each writer below
+    // knows a subscriber (or the queryable) for its key, allowed or not — the router decides.
+    for (session, key) in [
+        (&operator, command),
+        (&learner, command),
+        (&actor, command),
+        (&registry, command),
+        (&deploy, command),
+        (&operator, state),
+        (&learner, state),
+        (&actor, state),
+        (&bridge, state),
+        (&learner, op_key),
+        (&bridge, op_key),
+        (&actor, op_key),
+        (&operator, op_key),
+        (&learner, "l3p/a1-flat/metrics/learner"),
+    ] {
+        let publisher = session.declare_publisher(key).wait().unwrap();
+        wait_until(
+            &format!("a subscriber for {key} reaches {}", session.zid()),
+            || publisher.matching_status().wait().unwrap().matching(),
+        );
+    }
+    for (session, key) in [
+        (&deploy, "l3p/registry/pull"),
+        (&operator, "l3p/registry/list"),
+        (&actor, "l3p/registry/show"),
+        (&learner, "l3p/registry/put"),
+        (&actor, "l3p/registry/put"),
+        (&operator, "l3p/registry/tag"),
+        (&deploy, "l3p/registry/put"),
+    ] {
+        let querier = session.declare_querier(key).wait().unwrap();
+        wait_until(
+            &format!("the registry's queryable reaches {}", session.zid()),
+            || querier.matching_status().wait().unwrap().matching(),
+        );
+    }
     // A session delivers its own puts to its own subscribers without the router, so the
     // subscribing session is never among the writers tried below.
 

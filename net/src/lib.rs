@@ -487,6 +487,9 @@ mod tests {
     }
 
     /// A client started before its router waits for it (`connect_retry_s`); with 0 it fails at once.
+    /// Judged by order, not by a clock: the patient client starts first, the one-try client fails
+    /// with no router anywhere, and only then does the router start — so the patient client, which
+    /// gives up after `DEFAULT_CONNECT_RETRY_S`, can only connect if the one-try client did not wait.
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn a_client_waits_for_a_router_that_starts_late() {
         let port = free_loopback_port().unwrap();
@@ -497,27 +500,25 @@ mod tests {
             connect_retry_s: 0,
             ..ZenohSettings::default()
         };
-        let started = std::time::Instant::now();
+        let patient = ZenohSettings {
+            connect_retry_s: DEFAULT_CONNECT_RETRY_S,
+            ..once.clone()
+        };
+        let patient = tokio::spawn(async move { open_session(&patient).await });
         assert!(matches!(open_session(&once).await, Err(NetError::Open(_))));
-        assert!(started.elapsed() < std::time::Duration::from_secs(2));
-
+        // The router is late: the patient client's first tries find nothing either.
+        tokio::time::sleep(std::time::Duration::from_millis(500)).await;
+        assert!(!patient.is_finished(), "the patient client gave up at once");
         let router_settings = ZenohSettings {
             mode: "router".into(),
             listen: vec![endpoint],
             ..ZenohSettings::default()
         };
-        let router = tokio::spawn(async move {
-            tokio::time::sleep(std::time::Duration::from_millis(1500)).await;
-            open_session(&router_settings).await.unwrap()
-        });
-        let patient = ZenohSettings {
-            connect_retry_s: DEFAULT_CONNECT_RETRY_S,
-            ..once
-        };
-        let client = open_session(&patient)
+        let router = open_session(&router_settings).await.unwrap();
+        let client = patient
             .await
+            .unwrap()
             .expect("the client gave up before the router started");
-        let router = router.await.unwrap();
         let routers: Vec<_> = client.info().routers_zid().await.collect();
         assert_eq!(routers, vec![router.zid()]);
         client.close().await.unwrap();

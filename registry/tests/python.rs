@@ -4,10 +4,12 @@
 
 use std::process::Command;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use l3p_net::{ZenohSettings, free_loopback_port, open_session};
-use l3p_registry::{ArtifactKind, PutRequest, Registry, ServiceLimits, serve_with};
+use l3p_registry::{
+    ArtifactKind, ListFilter, PutRequest, Registry, RegistryClient, ServiceLimits, serve_with,
+};
 use tokio_util::sync::CancellationToken;
 
 const SCRIPT: &str = r#"
@@ -75,7 +77,20 @@ async fn python_eclipse_zenoh_client_reads_the_registry() {
         let cancel = cancel.clone();
         async move { serve_with(&session, registry, ServiceLimits::default(), cancel).await }
     });
-    tokio::time::sleep(Duration::from_millis(300)).await;
+    // Wait until the service answers on the port the script connects to.
+    let probe = open_session(&ZenohSettings::loopback(None, &[port]))
+        .await
+        .unwrap();
+    let client = RegistryClient::new(&probe);
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while let Err(e) = client.list(&ListFilter::default()).await {
+        assert!(
+            Instant::now() < deadline,
+            "registry service never answered: {e}"
+        );
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    probe.close().await.unwrap();
 
     let script = dir.path().join("client.py");
     std::fs::write(&script, SCRIPT).unwrap();
