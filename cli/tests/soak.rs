@@ -25,7 +25,8 @@
 //! lived ten minutes must not grow faster than `Limits::SOAK` per hour (so the one-hour soak,
 //! `L3P_SOAK_SECONDS=3600`, judges the router and every long-lived incarnation). At the end the
 //! registry is garbage-collected (newest 5 checkpoints kept): integrity, the newest checkpoint and
-//! the size before and after are checked and reported.
+//! the size before and after are checked and reported. `L3P_SOAK_BIN=<path>` runs another `l3p`
+//! binary (e.g. a copy, for a long soak beside rebuilds).
 
 use std::collections::BTreeMap;
 use std::io::Write as _;
@@ -46,8 +47,13 @@ const HOSTS: [&str; 5] = ["registry", "learner", "actor-a", "actor-b", "rogue"];
 /// Samples in an update that holds a chunk of each actor (2 actors × 4 envs × 8 steps).
 const BOTH_ACTORS_SAMPLES: f64 = 64.0;
 
+/// The `l3p` binary: this build's, or `L3P_SOAK_BIN` (a copy, so that an hour-long soak keeps
+/// restarting the binary it started with while the target directory is rebuilt).
 fn l3p() -> &'static str {
-    env!("CARGO_BIN_EXE_l3p")
+    static BIN: std::sync::OnceLock<String> = std::sync::OnceLock::new();
+    BIN.get_or_init(|| {
+        std::env::var("L3P_SOAK_BIN").unwrap_or_else(|_| env!("CARGO_BIN_EXE_l3p").to_string())
+    })
 }
 
 fn env_seconds(name: &str, default: u64) -> u64 {
