@@ -67,6 +67,11 @@ pub struct EvalArgs {
     /// flips is the policy's).
     #[arg(long)]
     pub mirrored: bool,
+    /// Start every episode's gait clock at this phase (fraction of the period; deployment starts
+    /// at 0). 0.5 puts the other diagonal pair in stance first — the mirror image of the usual
+    /// start: with `--mirrored` a symmetric world's exact mirror experiment.
+    #[arg(long, value_name = "PHASE")]
+    pub clock_start: Option<f32>,
     #[command(flatten)]
     pub pins: PhysicsPins,
     /// Play the policy through this action filter instead of its own `io.action_filter_alpha`
@@ -354,6 +359,9 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         config.env.commands.lin_vel_x = [range[0], range[1]];
     }
     args.pins.apply(&mut config.env)?;
+    if let Some(phase) = args.clock_start {
+        config.env.gait_clock_start = phase;
+    }
     let robot = l3p_robots::catalog::RobotSpec::by_name(&args.robot)?;
     let policy = if args.mirrored {
         mirror_policy(&policy, robot)?
@@ -396,6 +404,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             "level": args.level,
             "heading_hold": args.heading_hold,
             "mirrored": args.mirrored,
+            "clock_start": args.clock_start,
             "pins": {
                 "joint_damping": args.pins.joint_damping,
                 "joint_friction": args.pins.joint_friction,

@@ -424,6 +424,10 @@ pub struct EnvConfig {
     /// observation, φ = fraction of the clock's period since the episode began) and the
     /// `gait_clock` reward follows; 0 = no clock (IsaacLab). Part of the export's `io` contract.
     pub gait_clock_hz: f32,
+    /// Phase (fraction of the period, in [0, 1)) at which every episode's clock starts; 0 as in
+    /// deployment. 0.5 starts with the other diagonal pair in stance: the mirror image of an
+    /// episode's start (`l3p eval --clock-start`, a diagnostic of a drift's sign).
+    pub gait_clock_start: f32,
     pub terrain: TerrainConfig,
     pub commands: CommandConfig,
     pub noise: NoiseConfig,
@@ -469,6 +473,7 @@ impl Default for EnvConfig {
             action_clip: 100.0,
             action_filter_alpha: 1.0,
             gait_clock_hz: 0.0,
+            gait_clock_start: 0.0,
             recipe: Recipe::L3p,
             terrain: TerrainConfig::default(),
             commands: CommandConfig::default(),
@@ -519,6 +524,8 @@ pub struct TaskSpec {
     pub action_filter_alpha: f32,
     /// See [`EnvConfig::gait_clock_hz`]; 0 = no clock.
     pub gait_clock_hz: f32,
+    /// See [`EnvConfig::gait_clock_start`].
+    pub gait_clock_start: f32,
     pub terrain: TerrainSpec,
     pub commands: CommandConfig,
     pub noise: NoiseConfig,
@@ -658,6 +665,12 @@ impl EnvConfig {
             ));
         }
         check_nonneg("gait_clock_hz", self.gait_clock_hz)?;
+        if !(0.0..1.0).contains(&self.gait_clock_start) {
+            return Err(invalid(
+                "gait_clock_start",
+                format!("expected a phase in [0, 1), got {}", self.gait_clock_start),
+            ));
+        }
         let c = &self.commands;
         check_range("commands.lin_vel_x", c.lin_vel_x)?;
         check_range("commands.lin_vel_y", c.lin_vel_y)?;
@@ -787,6 +800,7 @@ impl EnvConfig {
             action_clip: self.action_clip,
             action_filter_alpha: self.action_filter_alpha,
             gait_clock_hz: self.gait_clock_hz,
+            gait_clock_start: self.gait_clock_start,
             terrain,
             commands: self.commands.clone(),
             noise: self.noise.clone(),

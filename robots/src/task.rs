@@ -216,11 +216,12 @@ impl Task {
     /// Phase of the gait clock for `env` now (0 without a clock): after `episode.steps` steps.
     pub fn gait_phase(&self, env: &TaskEnvState) -> f32 {
         if self.spec.gait_clock_hz > 0.0 {
-            gait_clock_phase(
+            let phase = gait_clock_phase(
                 env.episode.steps as u64,
                 self.spec.gait_clock_hz,
                 self.spec.step_dt,
-            )
+            ) + self.spec.gait_clock_start;
+            phase - phase.floor()
         } else {
             0.0
         }

@@ -517,6 +517,34 @@ fn gait_clock_phase_observation_and_reward_match_hand_computation() {
 }
 
 #[test]
+fn a_clock_started_half_a_period_late_swaps_the_diagonal_pairs() {
+    let (task, terrain) = clocked_flat_task(|cfg| cfg.gait_clock_start = 0.5);
+    let mut rng = StdRng::seed_from_u64(3);
+    let st = standing_state();
+    let mut env = commanded_half_speed(&task, &st, &mut rng);
+    let mut obs = vec![0.0; task.obs_dim()];
+    task.observe(&env, &st, &terrain, &mut rng, &mut obs)
+        .unwrap();
+    assert!(
+        obs[48].abs() < 1e-6 && (obs[49] + 1.0).abs() < 1e-6,
+        "{:?}",
+        &obs[48..]
+    );
+    assert_eq!(
+        gait_clock_stance(task.gait_phase(&env)),
+        [false, true, true, false]
+    );
+    // 13 steps later (0.52 of a period) the phase wraps to 0.02.
+    for _ in 0..13 {
+        task.evaluate(&mut env, &st, &[0.0; 12], &terrain);
+    }
+    assert!((task.gait_phase(&env) - 0.02).abs() < 1e-5);
+    let mut bad = crate::config::EnvConfig::default();
+    bad.gait_clock_start = 1.0;
+    assert!(bad.resolve("a1").is_err());
+}
+
+#[test]
 fn feet_clearance_matches_hand_computation() {
     // Peak at mid-swing, zero at lift-off and touch-down, zero for stance feet.
     assert_eq!(gait_clock_swing_height(0.25, 0.08), [0.0, 0.08, 0.08, 0.0]);
