@@ -127,6 +127,9 @@ pub struct SimBenchArgs {
     /// Seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Stairs and boxes as meshes with vertical risers (`[env.terrain] vertical_faces`).
+    #[arg(long)]
+    pub vertical_faces: bool,
 }
 
 /// Runs a `bench` subcommand.
@@ -370,7 +373,10 @@ fn sim(a: SimBenchArgs) -> anyhow::Result<()> {
         BenchTerrain::Paper => TerrainPreset::Paper,
     };
     let cfg = EnvConfig {
-        terrain: TerrainConfig::with_preset(preset),
+        terrain: TerrainConfig {
+            vertical_faces: a.vertical_faces,
+            ..TerrainConfig::with_preset(preset)
+        },
         height_scan: preset != TerrainPreset::Flat,
         ..EnvConfig::default()
     };
