@@ -72,6 +72,11 @@ pub struct EvalArgs {
     /// start: with `--mirrored` a symmetric world's exact mirror experiment.
     #[arg(long, value_name = "PHASE")]
     pub clock_start: Option<f32>,
+    /// Play `½(π(o) + M_a π(M_o o))`: the policy averaged with its mirror image, exactly left-right
+    /// symmetric at every state (one MLP of twice the width) — does a symmetric policy walk
+    /// straight?
+    #[arg(long, conflicts_with = "mirrored")]
+    pub symmetrized: bool,
     #[command(flatten)]
     pub pins: PhysicsPins,
     /// Play the policy through this action filter instead of its own `io.action_filter_alpha`
@@ -365,6 +370,8 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let robot = l3p_robots::catalog::RobotSpec::by_name(&args.robot)?;
     let policy = if args.mirrored {
         mirror_policy(&policy, robot)?
+    } else if args.symmetrized {
+        policy.averaged(&mirror_policy(&policy, robot)?)?
     } else {
         policy
     };
@@ -405,6 +412,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
             "heading_hold": args.heading_hold,
             "mirrored": args.mirrored,
             "clock_start": args.clock_start,
+            "symmetrized": args.symmetrized,
             "pins": {
                 "joint_damping": args.pins.joint_damping,
                 "joint_friction": args.pins.joint_friction,

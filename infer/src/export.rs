@@ -341,6 +341,77 @@ impl DeployPolicy {
         Ok(out)
     }
 
+    /// The mean of two policies of the same shape, `½(π_a(o) + π_b(o))`, as one MLP of twice the
+    /// width: the two hidden stacks side by side (block-diagonal weights; each block keeps its
+    /// activation) and the last layer summing both halves. With `other` this policy's mirror image
+    /// ([`permuted`](Self::permuted)) the result is exactly left-right symmetric at every state
+    /// (`l3p eval --symmetrized`). Standard deviations are averaged too.
+    pub fn averaged(&self, other: &Self) -> Result<Self, PolicyError> {
+        let same = self.layers.len() == other.layers.len()
+            && self
+                .layers
+                .iter()
+                .zip(&other.layers)
+                .all(|(a, b)| (a.input, a.output, a.elu) == (b.input, b.output, b.elu));
+        if !same || self.std.len() != other.std.len() {
+            return Err(PolicyError::Shape(
+                "policies of different shapes cannot be averaged".into(),
+            ));
+        }
+        let mut out = self.clone();
+        let last = self.layers.len() - 1;
+        for (k, (a, b)) in self.layers.iter().zip(&other.layers).enumerate() {
+            // Inputs: the observation for the first layer, else both halves' hidden units.
+            let (rows_a, rows_b) = if k == 0 {
+                (a.input, 0)
+            } else {
+                (a.input, b.input)
+            };
+            let (cols_a, cols_b) = if k == last {
+                (a.output, 0)
+            } else {
+                (a.output, b.output)
+            };
+            let (input, output) = (rows_a + rows_b, cols_a + cols_b);
+            let mut w = vec![0.0f32; input * output];
+            let mut bias = vec![0.0f32; output];
+            let half = if k == last { 0.5 } else { 1.0 };
+            for r in 0..a.input {
+                for c in 0..a.output {
+                    w[r * output + c] += half * a.w[r * a.output + c];
+                }
+            }
+            for r in 0..b.input {
+                let row = if k == 0 { r } else { rows_a + r };
+                for c in 0..b.output {
+                    let col = if k == last { c } else { cols_a + c };
+                    w[row * output + col] += half * b.w[r * b.output + c];
+                }
+            }
+            for c in 0..a.output {
+                bias[c] += half * a.b[c];
+            }
+            for c in 0..b.output {
+                let col = if k == last { c } else { cols_a + c };
+                bias[col] += half * b.b[c];
+            }
+            out.layers[k] = Dense {
+                w,
+                b: bias,
+                input,
+                output,
+                elu: a.elu,
+            };
+            if let Some(layer) = out.config.layers.get_mut(k) {
+                (layer.input, layer.output) = (input, output);
+            }
+        }
+        for (s, o) in out.std.iter_mut().zip(&other.std) {
+            *s = 0.5 * (*s + o);
+        }
+        Ok(out)
+    }
+
     /// Action means (allocating convenience form of [`act_into`](Self::act_into)).
     pub fn act(&self, obs: &[f32]) -> Result<Vec<f32>, PolicyError> {
         let mut out = Vec::new();

@@ -1,5 +1,7 @@
 //! `DeployPolicy::permuted` folds signed permutations of observations and actions into the export
 //! exactly: `π'(o) = M_a π(M_o o)`, twice the mirror is the policy itself, bad maps are refused.
+//! `DeployPolicy::averaged` is the mean of two policies as one wider MLP; with the mirror image it
+//! is exactly equivariant.
 
 use std::path::Path;
 
@@ -65,4 +67,36 @@ fn a_permuted_policy_acts_as_the_maps_say_and_twice_is_the_original() {
         .to_string();
     assert!(err.contains("not a permutation"), "{err}");
     assert!(policy.permuted(&oi, &os, &ai[..a - 1], &asg).is_err());
+}
+
+#[test]
+fn a_policy_averaged_with_its_mirror_is_exactly_symmetric() {
+    let policy = DeployPolicy::load(Path::new(EXPORT_DIR)).unwrap();
+    let (d, a) = (policy.obs_dim(), policy.action_dim());
+    let (oi, os) = involution(d);
+    let (ai, asg) = involution(a);
+    let mirrored = policy.permuted(&oi, &os, &ai, &asg).unwrap();
+    let both = policy.averaged(&mirrored).unwrap();
+    let obs: Vec<f32> = (0..3 * d).map(|i| (i as f32 * 0.37).cos()).collect();
+    // The mean of the two, from one network.
+    let (p, m) = (policy.act(&obs).unwrap(), mirrored.act(&obs).unwrap());
+    for ((g, x), y) in both.act(&obs).unwrap().iter().zip(&p).zip(&m) {
+        assert!(
+            (g - 0.5 * (x + y)).abs() < 1e-5,
+            "{g} vs mean of {x} and {y}"
+        );
+    }
+    // Equivariant: acting on the mirrored observation gives the mirrored action.
+    let want = apply(&ai, &asg, &both.act(&obs).unwrap());
+    let got = both.act(&apply(&oi, &os, &obs)).unwrap();
+    for (g, w) in got.iter().zip(&want) {
+        assert!((g - w).abs() < 1e-5, "{g} vs {w}");
+    }
+    // The original is not.
+    let want = apply(&ai, &asg, &p);
+    let got = policy.act(&apply(&oi, &os, &obs)).unwrap();
+    assert!(got.iter().zip(&want).any(|(g, w)| (g - w).abs() > 1e-3));
+    // Shapes must match.
+    let wider = both.averaged(&both).unwrap();
+    assert!(policy.averaged(&wider).is_err());
 }
