@@ -190,7 +190,12 @@ fn add(args: &AddArgs) -> anyhow::Result<()> {
         100.0 * inferred.foot_share,
         inferred.carriers
     );
-    for n in &inferred.notes {
+    // The legs' own warnings were printed with their table above.
+    for n in inferred
+        .notes
+        .iter()
+        .filter(|n| !inferred.legs.warnings.contains(n))
+    {
         println!("note: {n}");
     }
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -424,7 +429,7 @@ fn check(robot: &str, seconds: f32, training_gains: bool) -> anyhow::Result<()> 
         spec.stand_gains
     };
     println!(
-        "stand test: {} default pose, kp {} kd {}, {seconds} s on flat ground",
+        "stand test: {} default pose, kp {:.1} kd {:.2}, {seconds} s on flat ground",
         spec.name, gains.kp, gains.kd
     );
     let r = stand_check(

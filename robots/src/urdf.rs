@@ -856,9 +856,19 @@ impl<'a> Builder<'a> {
         let mut parts = Vec::new();
         for seg in segments {
             let length = seg.end.length();
+            let room = length - seg.clearance;
+            // Too short for the thinnest capsule (or a child joint at the link's origin): a
+            // zero-radius capsule would be a degenerate shape.
+            if room < 2.0 * MIN_CAPSULE_RADIUS {
+                parts.push(format!(
+                    "nothing towards `{}` ({length:.3} m: the segment lies within its shapes or is \
+                     too short)",
+                    seg.child
+                ));
+                continue;
+            }
             let u = seg.end / length;
             let axial = u.dot(inertia * u).max(0.0);
-            let room = length - seg.clearance;
             // At most a quarter of the segment, and no lighter than `MIN_STAND_IN_DENSITY`.
             let densest = (m / (MIN_STAND_IN_DENSITY * std::f32::consts::PI * length)).sqrt();
             let radius = (2.0 * axial / m)
@@ -867,13 +877,6 @@ impl<'a> Builder<'a> {
                 .min(densest)
                 .max(MIN_CAPSULE_RADIUS)
                 .min(0.5 * room);
-            if room <= 0.0 || radius <= 0.0 {
-                parts.push(format!(
-                    "nothing towards `{}` (the segment lies within its shapes)",
-                    seg.child
-                ));
-                continue;
-            }
             // From the joint to `room - radius` along the segment: the end cap reaches `room`.
             let reach = room - radius;
             let local = Pose::from_parts(u * (0.5 * reach), Rot3::from_rotation_arc(Vec3::Z, u));
