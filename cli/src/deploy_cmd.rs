@@ -252,6 +252,11 @@ pub struct ExportArgs {
     /// Read the registry at `<dir>/registry.db` directly instead of asking a service.
     #[arg(long, visible_alias = "data-dir")]
     pub data: Option<PathBuf>,
+    /// Export `½(π(o) + M_a π(M_o o))`, the policy averaged with its left-right mirror image: exactly
+    /// symmetric at every state, one MLP of twice the width under the same contract (`l3p eval
+    /// --symmetrized` plays it without exporting).
+    #[arg(long)]
+    pub symmetrized: bool,
     #[command(flatten)]
     pub net: NetArgs,
 }
@@ -315,6 +320,14 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
         } else {
             (bytes, cfg)
         }
+    };
+    let (export, export_config) = if args.symmetrized {
+        let policy = l3p_policy::DeployPolicy::from_bytes(&export)?;
+        let robot = l3p_robots::catalog::RobotSpec::by_name(&policy.config.robot)?;
+        let symmetric = policy.averaged(&crate::eval_cmd::mirror_policy(&policy, robot)?)?;
+        (symmetric.to_bytes()?, symmetric.config)
+    } else {
+        (export, export_config)
     };
     std::fs::create_dir_all(&args.output)
         .with_context(|| format!("creating {}", args.output.display()))?;

@@ -317,7 +317,7 @@ pub fn evaluate_row(
 
 /// `policy`'s left-right mirror image on `robot` (its task mirror under the policy's own
 /// observation layout).
-fn mirror_policy(
+pub(crate) fn mirror_policy(
     policy: &DeployPolicy,
     robot: &l3p_robots::catalog::RobotSpec,
 ) -> anyhow::Result<DeployPolicy> {

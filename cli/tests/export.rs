@@ -146,3 +146,59 @@ fn export_onnx_writes_the_model_of_the_same_export() {
         "{stderr}"
     );
 }
+
+/// `l3p export --symmetrized` writes the policy averaged with its mirror image: the same contract,
+/// hidden layers twice as wide, actions the mean of the policy's and its mirror image's.
+#[test]
+fn a_symmetrized_export_is_the_mean_of_the_policy_and_its_mirror() {
+    let dir = tempfile::tempdir().unwrap();
+    let source = repo().join("docs/a1-flat-session27/policy");
+    let out_dir = dir.path().join("sym");
+    let out = Command::new(env!("CARGO_BIN_EXE_l3p"))
+        .args(["export", source.to_str().unwrap(), "--symmetrized", "-o"])
+        .arg(&out_dir)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let original = DeployPolicy::load(&source).unwrap();
+    let symmetric = DeployPolicy::load(&out_dir).unwrap();
+    assert_eq!(symmetric.config.io, original.config.io);
+    assert_eq!(
+        symmetric.config.layers[0].output,
+        2 * original.config.layers[0].output
+    );
+    // Its own mirror image is itself: exactly symmetric.
+    let robot = l3p_robots::catalog::RobotSpec::by_name("a1").unwrap();
+    let clock = original.config.io.as_ref().unwrap().gait_clock_hz > 0.0;
+    let mirror = l3p_robots::mirror::TaskMirror::new(
+        &robot.model().unwrap(),
+        &robot.joint_names,
+        &robot.default_pose,
+        false,
+        clock,
+    )
+    .unwrap();
+    let mirrored = symmetric
+        .permuted(
+            &mirror.observation.index,
+            &mirror.observation.sign,
+            &mirror.action.index,
+            &mirror.action.sign,
+        )
+        .unwrap();
+    let obs: Vec<f32> = (0..2 * original.obs_dim())
+        .map(|i| 0.3 * (i as f32 * 0.83).sin())
+        .collect();
+    for (a, b) in symmetric
+        .act(&obs)
+        .unwrap()
+        .iter()
+        .zip(&mirrored.act(&obs).unwrap())
+    {
+        assert!((a - b).abs() < 1e-5, "{a} vs {b}");
+    }
+}

@@ -503,6 +503,36 @@ fn dense_forward(l: &Dense, x: &[f32], n: usize, y: &mut Vec<f32>) {
     }
 }
 
+impl DeployPolicy {
+    /// The export file of this policy (safetensors with its config in the metadata): what
+    /// [`from_bytes`](Self::from_bytes) reads back exactly, e.g. for a policy made by
+    /// [`averaged`](Self::averaged).
+    pub fn to_bytes(&self) -> Result<Vec<u8>, PolicyError> {
+        let bad = |m: String| PolicyError::Export(m);
+        let le = |v: &[f32]| v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>();
+        let mut buffers: Vec<(String, Vec<usize>, Vec<u8>)> = Vec::new();
+        for (cfg, w, b) in self.layer_tensors() {
+            buffers.push((
+                format!("{}.weight", cfg.name),
+                vec![cfg.output, cfg.input],
+                le(&w),
+            ));
+            buffers.push((format!("{}.bias", cfg.name), vec![cfg.output], le(b)));
+        }
+        buffers.push((self.config.std.clone(), vec![self.std.len()], le(&self.std)));
+        let views = buffers
+            .iter()
+            .map(|(name, shape, data)| {
+                safetensors::tensor::TensorView::new(safetensors::Dtype::F32, shape.clone(), data)
+                    .map(|v| (name.clone(), v))
+                    .map_err(|e| bad(e.to_string()))
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        safetensors::serialize(views, Some(export_metadata(&self.config)?))
+            .map_err(|e| bad(e.to_string()))
+    }
+}
+
 /// Load the JSON config of a directory export (`policy.json`).
 pub fn read_export_json(dir: &Path) -> Result<ExportConfig, PolicyError> {
     let path = dir.join("policy.json");

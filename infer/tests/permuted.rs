@@ -96,6 +96,13 @@ fn a_policy_averaged_with_its_mirror_is_exactly_symmetric() {
     let want = apply(&ai, &asg, &p);
     let got = policy.act(&apply(&oi, &os, &obs)).unwrap();
     assert!(got.iter().zip(&want).any(|(g, w)| (g - w).abs() > 1e-3));
+    // It writes as an export and reads back the same.
+    let back = DeployPolicy::from_bytes(&both.to_bytes().unwrap()).unwrap();
+    assert_eq!(back.act(&obs).unwrap(), both.act(&obs).unwrap());
+    assert_eq!(
+        back.config.layers[0].output,
+        2 * policy.config.layers[0].output
+    );
     // Shapes must match.
     let wider = both.averaged(&both).unwrap();
     assert!(policy.averaged(&wider).is_err());
