@@ -66,8 +66,8 @@ pub struct Cli {
 /// How `l3p-deploy` joins the Zenoh network: the flags of `l3p`'s `NetArgs`.
 #[derive(Debug, Clone, Args)]
 pub struct NetFlags {
-    /// Config file: its [zenoh] section (with [zenoh.tls]) and [deploy] are used; the other
-    /// sections of an l3p config are accepted and not read.
+    /// Config file: its [zenoh] section (with [zenoh.tls]), [deploy] and [run] data_dir (added
+    /// robots) are used; the other sections of an l3p config are accepted and not read.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Zenoh endpoint to connect to (repeatable); default tcp/127.0.0.1:7447 without --config.
@@ -118,9 +118,9 @@ pub fn zenoh_with_flags(
     zenoh
 }
 
-/// What `l3p-deploy` reads of an l3p config file: `[zenoh]` and `[deploy]`, strictly. The other
-/// sections of `l3p`'s config (`[run]`, `[env]`, `[model]`, `[ppo]`, `[learner]`, `[rollout]`,
-/// `[[actors]]`) are accepted unread, so one `deploy.toml` serves both binaries; any other key is
+/// What `l3p-deploy` reads of an l3p config file: `[zenoh]` and `[deploy]`, strictly, and `[run]
+/// data_dir`. The other sections of `l3p`'s config (`[env]`, `[model]`, `[ppo]`, `[learner]`,
+/// `[rollout]`, `[[actors]]`, the rest of `[run]`) are accepted unread, so one `deploy.toml` serves both binaries; any other key is
 /// an error, as in `l3p`. Checking those sections needs their crates (the learner's among them),
 /// which the lean binary does not link: `l3p config <file>` checks the whole file.
 #[derive(Debug, Clone, Default, Deserialize)]
@@ -128,7 +128,8 @@ pub fn zenoh_with_flags(
 pub struct DeployFile {
     pub zenoh: ZenohSettings,
     pub deploy: SafetyConfig,
-    run: Option<IgnoredAny>,
+    /// `[run]`: only `data_dir`, whose `robots/` holds added robots, as `l3p` reads it.
+    pub run: RunSection,
     env: Option<IgnoredAny>,
     model: Option<IgnoredAny>,
     ppo: Option<IgnoredAny>,
@@ -137,10 +138,29 @@ pub struct DeployFile {
     actors: Option<IgnoredAny>,
 }
 
+/// What `l3p-deploy` reads of `[run]`: where the run's data lives (its other keys are `l3p`'s).
+#[derive(Debug, Clone, Deserialize)]
+#[serde(default)]
+pub struct RunSection {
+    /// The data directory; robots added with `l3p robots add` are in its `robots/`.
+    pub data_dir: PathBuf,
+}
+
+impl Default for RunSection {
+    /// `l3p`'s default `[run] data_dir`.
+    fn default() -> Self {
+        Self {
+            data_dir: PathBuf::from("l3p-data"),
+        }
+    }
+}
+
 impl DeployFile {
-    /// Load and strictly parse `path`, and validate its `[deploy]` settings.
+    /// Load and strictly parse `path`, register the robots added under its `[run] data_dir` (as
+    /// `l3p` does for every config it loads), and validate its `[deploy]` settings.
     pub fn load(path: &Path) -> Result<Self, l3p_proto::config::ConfigError> {
         let file: DeployFile = l3p_proto::config::load_toml(path)?;
+        l3p_robots::added::load_added_robots(Some(&file.run.data_dir));
         file.deploy
             .validate()
             .map_err(|message| l3p_proto::config::ConfigError::Invalid {

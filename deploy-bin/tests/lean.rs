@@ -153,3 +153,59 @@ fn the_lean_binary_refuses_unauthenticated_links_off_loopback_unless_insecure() 
         "{stderr}"
     );
 }
+
+/// A robot added with `l3p robots add` (here: A1's URDF and catalog values under another name, in
+/// the config's `[run] data_dir`) is known to the lean binary, which has no simulator: it gets as
+/// far as refusing the A1 policy for that robot.
+#[test]
+fn the_lean_binary_knows_robots_added_under_the_configs_data_dir() {
+    let dir = tempfile::tempdir().unwrap();
+    let robots = dir.path().join("data").join("robots");
+    std::fs::create_dir_all(&robots).unwrap();
+    let a1 = RobotSpec::by_name("a1").unwrap();
+    let urdf = a1.urdf.replacen("name=\"a1\"", "name=\"lean_quad\"", 1);
+    std::fs::write(robots.join("lean_quad.urdf"), urdf).unwrap();
+    let strings = |s: &[&str]| s.iter().map(|x| x.to_string()).collect::<Vec<_>>();
+    let description = l3p_robots::added::RobotDescription {
+        name: "lean_quad".into(),
+        display_name: "A1 under another name".into(),
+        urdf: "lean_quad.urdf".into(),
+        joint_names: a1.joint_names.map(str::to_string),
+        axis_signs: [1.0; 12],
+        default_pose: a1.default_pose,
+        base_link: a1.base_link.into(),
+        foot_links: a1.foot_links.map(str::to_string),
+        penalised_links: strings(a1.penalised_links),
+        termination_links: strings(a1.termination_links),
+        kp: a1.training_gains.kp,
+        kd: a1.training_gains.kd,
+        effort_limit: a1.effort_limit,
+        velocity_limit: a1.velocity_limit,
+        action_scale: a1.action_scale,
+        spawn_height: a1.spawn_height,
+        mass: a1.published_mass,
+    };
+    std::fs::write(robots.join("lean_quad.toml"), description.to_toml()).unwrap();
+    let config = dir.path().join("deploy.toml");
+    std::fs::write(
+        &config,
+        format!("[run]\ndata_dir = {:?}\n", dir.path().join("data")),
+    )
+    .unwrap();
+    let port = free_loopback_port().unwrap();
+    let out = lean()
+        .args(["--robot", "lean_quad", "--robot-id", "dog"])
+        .arg("--policy")
+        .arg(trained_policy())
+        .arg("--config")
+        .arg(&config)
+        .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains("this robot is lean_quad") && !stderr.contains("unknown robot"),
+        "{stderr}"
+    );
+}
