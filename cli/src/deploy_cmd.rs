@@ -1,124 +1,39 @@
 //! `l3p deploy`, `l3p sim-robot`, `l3p operate` and `l3p export`: running a policy on a robot (or
 //! the simulator standing in for one), talking to the running controller, and exporting weights for
-//! other runtimes. The work lives in `l3p_deploy`.
+//! other runtimes. The work lives in `l3p_deploy`; `l3p deploy` itself is `l3p_deploy_bin`'s
+//! command, which the lean `l3p-deploy` binary runs too.
 
 use std::path::{Path, PathBuf};
-use std::time::Duration;
 
 use anyhow::Context;
 use clap::{Args, ValueEnum};
 use l3p_actor::SimRobotOptions;
-use l3p_deploy::DeployOptions;
-use l3p_net::{Exposure, ZenohSettings, open_session};
+use l3p_deploy_bin::seconds_arg;
+use l3p_net::open_session;
 use l3p_policy::{ExportConfig, cpu_device};
-use l3p_proto::{OperatorAction, keys};
+use l3p_proto::OperatorAction;
 use l3p_registry::RegistryClient;
 use l3p_robots::catalog::RobotSpec as Robot;
 
 use crate::runtime::{self, NetArgs};
 
+/// `l3p deploy`: the command's own arguments (shared with the lean `l3p-deploy` binary) and `l3p`'s
+/// network flags. (No argument group of its own: its name would clash with the inner
+/// `DeployArgs`'s.)
 #[derive(Debug, Args)]
+#[group(skip)]
 pub struct DeployArgs {
-    /// Robot model (from `l3p robots list`).
-    #[arg(long)]
-    pub robot: String,
-    /// Robot instance id: the `<id>` of `l3p/robot/<id>/state|command`.
-    #[arg(long)]
-    pub robot_id: String,
-    /// Deploy artifact `name@version|alias` from the registry (e.g. `a1-flat-a1@latest`), or an
-    /// export file / directory.
-    #[arg(long)]
-    pub policy: String,
-    /// Stop (through damping) after this many seconds; default: until Ctrl-C / SIGTERM.
-    #[arg(long)]
-    pub duration: Option<f64>,
-    /// Run over links that leave this machine without mutual TLS (a plain `tcp/` endpoint off
-    /// loopback, multicast scouting). Refused without this flag: anyone who reaches such a link can
-    /// command the robot. With it, every status carries a warning.
-    #[arg(long)]
-    pub insecure: bool,
-    /// A zero yaw-rate command holds the heading the robot has when it becomes zero (yaw rate =
-    /// clip(0.5 · heading error, ±1), the training task's heading mode, on the base's yaw); a
-    /// non-zero yaw rate passes through. Without it a zero yaw rate is passed to the policy as is.
-    #[arg(long)]
-    pub heading_hold: bool,
+    #[command(flatten)]
+    pub deploy: l3p_deploy_bin::DeployArgs,
     #[command(flatten)]
     pub net: NetArgs,
 }
 
-/// Why `l3p deploy` may not run over these links, or `Ok(Some(why))` when it may only because
-/// `insecure` says so (see [`DeployArgs::insecure`]).
-pub fn check_deploy_links(zenoh: &ZenohSettings, insecure: bool) -> anyhow::Result<Option<String>> {
-    match zenoh.exposure()? {
-        Exposure::Local | Exposure::Authenticated => Ok(None),
-        Exposure::Unauthenticated(why) if insecure => Ok(Some(why)),
-        Exposure::Unauthenticated(why) => anyhow::bail!(
-            "refusing to command a robot over unauthenticated links: {why}\n\
-             hint: give [zenoh.tls] ca, cert and key (a certificate with CN l3p-deploy, \
-             deploy/certs/README.md) and use quic/ (or tls/) endpoints, keep every endpoint on loopback, or \
-             pass --insecure on a network you trust"
-        ),
-    }
-}
-
-/// A seconds argument as a duration: a clear error, not a panic, for a negative or non-finite value.
-fn seconds_arg(flag: &str, seconds: Option<f64>) -> anyhow::Result<Option<Duration>> {
-    seconds
-        .map(|s| {
-            Duration::try_from_secs_f64(s)
-                .map_err(|e| anyhow::anyhow!("{flag} {s}: {e} (seconds, finite and >= 0)"))
-        })
-        .transpose()
-}
-
+/// `l3p deploy`: the full config file is loaded and checked (as every `l3p` command does), then the
+/// command runs as `l3p-deploy` runs it ([`l3p_deploy_bin::run`]).
 pub fn deploy(args: DeployArgs) -> anyhow::Result<()> {
     let (config, zenoh) = args.net.load()?;
-    let insecure = check_deploy_links(&zenoh, args.insecure)?;
-    if let Some(why) = &insecure {
-        tracing::warn!("--insecure: {why}; anyone who reaches these links can command the robot");
-    }
-    let robot = Robot::by_name(&args.robot)?;
-    keys::validate_segment("robot id", &args.robot_id)?;
-    config
-        .deploy
-        .validate()
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
-    let rt = runtime::tokio_runtime()?;
-    rt.block_on(async {
-        let session = open_session(&zenoh).await?;
-        let path = Path::new(&args.policy);
-        let loaded = if path.exists() {
-            l3p_deploy::read_policy_file(path, robot)?
-        } else {
-            let client = RegistryClient::new(&session);
-            l3p_deploy::fetch_policy(&client, &args.policy, robot).await?.1
-        };
-        if loaded.io_from_catalog {
-            tracing::warn!(
-                "{} carries no robot I/O contract (older export): using this build's {} catalog entry",
-                loaded.reference,
-                robot.name
-            );
-        }
-        eprintln!(
-            "deploying {} (sha256 {}) on {} as robot id {}",
-            loaded.reference, loaded.sha256, robot.name, args.robot_id
-        );
-        let cancel = runtime::cancel_on_signal();
-        let opts = DeployOptions {
-            robot,
-            robot_id: args.robot_id.clone(),
-            safety: config.deploy.clone(),
-            duration: seconds_arg("--duration", args.duration)?,
-            status_every: Duration::from_secs(1),
-            insecure,
-            heading_hold: args.heading_hold,
-        };
-        let status = l3p_deploy::run_deploy(&session, loaded, opts, cancel).await?;
-        println!("{}", serde_json::to_string(&status)?);
-        let _ = session.close().await;
-        Ok(())
-    })
+    l3p_deploy_bin::run(&args.deploy, zenoh, config.deploy)
 }
 
 #[derive(Debug, Args)]

@@ -4,9 +4,6 @@
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
-use l3p_cli::runtime::Interrupted;
-
-mod logging;
 
 /// Train, transfer and deploy latent-to-latent locomotion policies (L3P) for legged robots.
 #[derive(Debug, Parser)]
@@ -65,7 +62,7 @@ enum Command {
 
 fn main() -> ExitCode {
     keep_large_allocations_on_the_heap();
-    logging::init();
+    l3p_cli::runtime::init_logging();
     let cli = Cli::parse();
     let verbose = cli.verbose || l3p_cli::runtime::lib_backtrace_asked();
     if cli.verbose {
@@ -78,19 +75,7 @@ fn main() -> ExitCode {
     }
     // Robots added with `l3p robots add` ($L3P_ROBOTS_DIR, else ./l3p-data/robots).
     l3p_cli::robots_cmd::load_added_robots(None);
-    match run(cli.command) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => match e.downcast_ref::<Interrupted>() {
-            Some(interrupted) => {
-                eprintln!("{interrupted}");
-                ExitCode::from(130)
-            }
-            None => {
-                eprintln!("{}", l3p_cli::runtime::error_report(&e, verbose));
-                ExitCode::FAILURE
-            }
-        },
-    }
+    l3p_cli::runtime::exit_code(run(cli.command), verbose)
 }
 
 fn run(command: Command) -> anyhow::Result<()> {

@@ -114,15 +114,7 @@ pub fn run(args: RobotsArgs) -> anyhow::Result<()> {
 /// `./l3p-data/robots`). A broken description is reported and skipped: it must not stop commands
 /// that do not use it (using it then fails with "unknown robot" naming the known ones).
 pub fn load_added_robots(data_dir: Option<&Path>) {
-    let dir = match data_dir {
-        Some(d) => d.join("robots"),
-        None => std::env::var_os(l3p_robots::added::ROBOTS_DIR_ENV)
-            .map(PathBuf::from)
-            .unwrap_or_else(|| PathBuf::from("l3p-data").join("robots")),
-    };
-    if let Err(e) = l3p_robots::added::load_dir(&dir) {
-        tracing::warn!("added robots in {}: {e}", dir.display());
-    }
+    l3p_robots::added::load_added_robots(data_dir);
 }
 
 fn add(args: &AddArgs) -> anyhow::Result<()> {

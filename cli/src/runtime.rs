@@ -1,13 +1,18 @@
 //! Shared glue of the daemon commands: [`NetArgs`] (the network flags of every command that joins
-//! Zenoh), the tokio runtime, Ctrl-C → cancellation ([`Interrupted`]), and the policy's view of the
-//! configured robots.
+//! Zenoh), the tokio runtime, Ctrl-C → cancellation ([`Interrupted`]), the error report, and the
+//! policy's view of the configured robots. The process glue (logging, runtime, signals, error
+//! report) lives in `l3p_deploy_bin::process`, which the lean `l3p-deploy` binary shares, and is
+//! re-exported here.
 
 use std::path::PathBuf;
 
 use clap::Args;
+pub use l3p_deploy_bin::process::{
+    Interrupted, cancel_on_signal, error_report, exit_code, init_logging, lib_backtrace_asked,
+    tokio_runtime,
+};
 use l3p_net::ZenohSettings;
 use l3p_robots::catalog::RobotSpec as Robot;
-use tokio_util::sync::CancellationToken;
 
 use crate::config::Config;
 
@@ -34,86 +39,14 @@ impl NetArgs {
             Some(path) => Config::load(path)?,
             None => Config::default(),
         };
-        let mut zenoh = config.zenoh.clone();
-        if self.config.is_none() {
-            zenoh.multicast_scouting = false;
-            zenoh.connect = vec!["tcp/127.0.0.1:7447".into()];
-        }
-        if !self.connect.is_empty() {
-            zenoh.connect = self.connect.clone();
-        }
-        if !self.listen.is_empty() {
-            zenoh.listen = self.listen.clone();
-        }
+        let zenoh = l3p_deploy_bin::command::zenoh_with_flags(
+            config.zenoh.clone(),
+            self.config.is_some(),
+            &self.connect,
+            &self.listen,
+        );
         Ok((config, zenoh))
     }
-}
-
-/// The command stopped because its user asked it to (Ctrl-C, SIGTERM) and left its work resumable:
-/// an expected end, which `main` reports as its message and exit status 130 — never with the
-/// backtrace that `RUST_BACKTRACE=1` adds to a failure.
-#[derive(Debug)]
-pub struct Interrupted(pub String);
-
-impl std::fmt::Display for Interrupted {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.0)
-    }
-}
-
-impl std::error::Error for Interrupted {}
-
-/// Whether `RUST_LIB_BACKTRACE` asks for error backtraces (set and not `0`, as std reads it).
-/// `RUST_BACKTRACE` alone does not: it is for panics, and CI sets it for every command.
-pub fn lib_backtrace_asked() -> bool {
-    std::env::var_os("RUST_LIB_BACKTRACE").is_some_and(|v| v != "0")
-}
-
-/// A failed command's error as `main` prints it: `error: ` and the chain of causes on one line
-/// (`context: cause: …`, hint lines as the messages hold them); `verbose` (`-v`, or
-/// `RUST_LIB_BACKTRACE`) adds anyhow's full report — the causes one per line and the stack
-/// backtrace when one was captured.
-pub fn error_report(error: &anyhow::Error, verbose: bool) -> String {
-    if verbose {
-        format!("error: {error:?}")
-    } else {
-        format!("error: {error:#}")
-    }
-}
-
-/// A multi-threaded tokio runtime for Zenoh and the daemon loops (heavy work runs on blocking threads).
-pub fn tokio_runtime() -> anyhow::Result<tokio::runtime::Runtime> {
-    Ok(tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()?)
-}
-
-/// A token cancelled by the first Ctrl-C (SIGINT) or SIGTERM; a second Ctrl-C exits at once.
-pub fn cancel_on_signal() -> CancellationToken {
-    let cancel = CancellationToken::new();
-    let token = cancel.clone();
-    tokio::spawn(async move {
-        let term = async {
-            #[cfg(unix)]
-            if let Ok(mut s) =
-                tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate())
-            {
-                s.recv().await;
-                return;
-            }
-            std::future::pending::<()>().await
-        };
-        tokio::select! {
-            _ = tokio::signal::ctrl_c() => {}
-            _ = term => {}
-        }
-        tracing::info!("stopping (signal received; a second Ctrl-C exits immediately)");
-        token.cancel();
-        let _ = tokio::signal::ctrl_c().await;
-        std::process::exit(130);
-    });
-    cancel
 }
 
 /// Observation size of the configured task.
@@ -214,25 +147,4 @@ pub fn configured_robots(config: &Config) -> anyhow::Result<Vec<&'static Robot>>
         anyhow::bail!("the config lists no [[actors]]\nhint: add e.g. [[actors]] robot = \"a1\"");
     }
     Ok(robots)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn an_error_prints_its_chain_and_hint_without_a_backtrace_unless_verbose() {
-        let error = anyhow::anyhow!("leg joints without limits\nhint: add <limit/>")
-            .context("adding lab_dog.urdf");
-        let short = error_report(&error, false);
-        assert_eq!(
-            short,
-            "error: adding lab_dog.urdf: leg joints without limits\nhint: add <limit/>"
-        );
-        let long = error_report(&error, true);
-        assert!(
-            long.starts_with("error: adding lab_dog.urdf") && long.contains("Caused by:"),
-            "{long}"
-        );
-    }
 }

@@ -570,3 +570,46 @@ fn deploy_refuses_unauthenticated_links_off_loopback_unless_insecure() {
     );
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
+
+/// `l3p-deploy` (the lean binary, `deploy-bin/`) takes exactly the flags of `l3p deploy` and reads
+/// the same `[zenoh]` and `[deploy]` from a config file with the same flags: the robot runs what was
+/// rehearsed with `l3p deploy`. (Its behaviour end to end: `deploy-bin/tests/lean.rs`.)
+#[test]
+fn the_lean_binary_takes_the_flags_and_settings_of_l3p_deploy() {
+    use clap::{Args, CommandFactory};
+    let longs = |cmd: &clap::Command| -> std::collections::BTreeSet<String> {
+        cmd.get_arguments()
+            .filter_map(|a| a.get_long())
+            .filter(|l| !["help", "version", "verbose"].contains(l))
+            .map(str::to_string)
+            .collect()
+    };
+    let l3p = l3p_cli::deploy_cmd::DeployArgs::augment_args(clap::Command::new("deploy"));
+    let lean = l3p_deploy_bin::Cli::command();
+    assert_eq!(longs(&l3p), longs(&lean));
+    // clap's own checks (unique ids and groups), which a parse in a debug build would run
+    l3p.clone().debug_assert();
+    lean.clone().debug_assert();
+    assert!(
+        lean.get_arguments()
+            .any(|a| a.get_long() == Some("verbose"))
+    );
+
+    let reference = Path::new(env!("CARGO_MANIFEST_DIR")).join("../configs/reference.toml");
+    let connect = vec!["tcp/127.0.0.1:7999".to_string()];
+    let (config, zenoh) = l3p_cli::runtime::NetArgs {
+        config: Some(reference.clone()),
+        connect: connect.clone(),
+        listen: Vec::new(),
+    }
+    .load()
+    .unwrap();
+    let (safety, lean_zenoh) = l3p_deploy_bin::NetFlags {
+        config: Some(reference),
+        connect,
+        listen: Vec::new(),
+    }
+    .load()
+    .unwrap();
+    assert_eq!((safety, lean_zenoh), (config.deploy, zenoh));
+}

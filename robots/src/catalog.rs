@@ -305,26 +305,13 @@ pub struct UnknownRobot {
     pub known: String,
 }
 
-/// A robot added in this process (`crate::added`); added robots need the simulator (feature `sim`)
-/// to be described, so a build without it knows the catalog only.
-#[cfg(feature = "sim")]
+/// A robot added in this process (`crate::added`).
 fn added_robot(key: &str) -> Option<&'static RobotSpec> {
     crate::added::find(key)
 }
 
-#[cfg(not(feature = "sim"))]
-fn added_robot(_key: &str) -> Option<&'static RobotSpec> {
-    None
-}
-
-#[cfg(feature = "sim")]
 fn added_robots() -> Vec<&'static RobotSpec> {
     crate::added::all_added()
-}
-
-#[cfg(not(feature = "sim"))]
-fn added_robots() -> Vec<&'static RobotSpec> {
-    Vec::new()
 }
 
 impl RobotSpec {

@@ -39,7 +39,8 @@
 //!   [`task::Task::observe`] makes it (a test compares the two), for exports and the deploy controller.
 //!
 //! Without the default feature `sim` the crate has no rapier: catalog, models, task, terrain, gait
-//! metrics and `io` remain; `sim`, `vecenv`, `bench` and `added` need it.
+//! metrics, `io` and added robots (registered from their descriptions) remain; `sim`, `vecenv`,
+//! `bench` and `added::describe` need it.
 //!
 //! Architecture invariant: this crate knows nothing of burn, Zenoh or tokio.
 
@@ -57,9 +58,9 @@ pub mod task;
 pub mod terrain;
 pub mod urdf;
 
-// The simulator and what needs it (feature `sim`, on by default).
-#[cfg(feature = "sim")]
+// Added robots; inferring one (`added::describe`) needs the simulator, registering one does not.
 pub mod added;
+// The simulator and what needs it (feature `sim`, on by default).
 #[cfg(feature = "sim")]
 pub mod bench;
 #[cfg(feature = "sim")]

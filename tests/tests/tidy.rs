@@ -3,7 +3,8 @@
 //! "Dependency graph" shows the same list), every normal dependency is used by its crate's sources,
 //! so an unused one (compile time on two cores) cannot creep back, and the crates that reach the
 //! registry only over Zenoh do not link SQLite through another project crate, and the deploy
-//! controller links neither the simulator nor the training stack.
+//! controller links neither the simulator nor the training stack — nor does `l3p-deploy`, the lean
+//! binary that runs it on the robot (no viewer either).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -48,6 +49,16 @@ const ALLOWED: &[(&str, &[&str])] = &[
         ],
     ),
     (
+        "l3p-deploy-bin",
+        &[
+            "l3p-proto",
+            "l3p-net",
+            "l3p-robots",
+            "l3p-registry-client",
+            "l3p-deploy",
+        ],
+    ),
+    (
         "l3p-cli",
         &[
             "l3p-proto",
@@ -58,6 +69,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "l3p-actor",
             "l3p-registry",
             "l3p-deploy",
+            "l3p-deploy-bin",
         ],
     ),
     ("l3p-tests", &[]),
@@ -70,6 +82,7 @@ const WITHOUT_SQLITE: &[&str] = &[
     "l3p-learner",
     "l3p-actor",
     "l3p-deploy",
+    "l3p-deploy-bin",
 ];
 
 /// Dependencies present for their features or for a dependency's build, not named in the source.
@@ -396,4 +409,57 @@ fn the_deploy_controller_links_no_simulator_and_no_training_stack() {
         "l3p-deploy links {offenders:?} (through {deploy:?})\nhint: depend on l3p-infer (not \
          l3p-policy), on l3p-robots without its `sim` feature, and on l3p-registry-client"
     );
+}
+
+/// What `l3p-deploy` (package `l3p-deploy-bin`), the binary the robot computer runs, may not link:
+/// the simulator, the tensor and training stack, the registry store, the viewer.
+const NOT_IN_THE_LEAN_BINARY: &[&str] = &[
+    "rapier3d",
+    "burn",
+    "rusqlite",
+    "rerun",
+    "l3p-policy",
+    "l3p-learner",
+    "l3p-actor",
+    "l3p-registry",
+];
+
+#[test]
+fn the_lean_deploy_binary_links_no_physics_learner_sqlite_or_viewer() {
+    // The walk finds each of them where it is: `l3p` links them all (Rerun by default).
+    let cli = linked_packages("l3p-cli");
+    let missing: Vec<&str> = NOT_IN_THE_LEAN_BINARY
+        .iter()
+        .copied()
+        .filter(|p| !cli.contains(*p))
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "l3p-cli should link {missing:?}: {cli:?}"
+    );
+    let lean = linked_packages("l3p-deploy-bin");
+    let offenders: Vec<&str> = NOT_IN_THE_LEAN_BINARY
+        .iter()
+        .copied()
+        .filter(|p| lean.contains(*p))
+        .collect();
+    assert!(
+        offenders.is_empty(),
+        "l3p-deploy links {offenders:?} (through {lean:?})\nhint: the lean binary depends on \
+         l3p-deploy, l3p-infer (not l3p-policy), l3p-robots without `sim` and l3p-registry-client; \
+         what only `l3p` needs goes in l3p-cli"
+    );
+    // And it is a binary of that package: the one that `cargo build -p l3p-deploy-bin` makes.
+    let manifest: toml::Table =
+        std::fs::read_to_string(root().join("deploy-bin").join("Cargo.toml"))
+            .unwrap()
+            .parse()
+            .unwrap();
+    let bins: Vec<&str> = manifest["bin"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter_map(|b| b["name"].as_str())
+        .collect();
+    assert_eq!(bins, ["l3p-deploy"]);
 }
