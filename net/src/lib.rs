@@ -492,6 +492,8 @@ mod tests {
     /// gives up after `DEFAULT_CONNECT_RETRY_S`, can only connect if the one-try client did not wait.
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn a_client_waits_for_a_router_that_starts_late() {
+        // Its router listens in this process: not while the listener probe below looks.
+        let _sockets = SOCKETS.lock().await;
         let port = free_loopback_port().unwrap();
         let endpoint = format!("tcp/127.0.0.1:{port}");
         let once = ZenohSettings {
@@ -555,10 +557,15 @@ mod tests {
         assert!(text.contains("1234") && !text.contains("7000"), "{text}");
     }
 
+    /// Held by the tests that open listening sessions or probe this process's listeners (tests run
+    /// in parallel threads of one process, so a router one opens is a listener the other sees).
+    static SOCKETS: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
     /// A connect-only session (what actors and one-shot commands open) listens on no port.
     #[cfg(target_os = "linux")]
     #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
     async fn a_connect_only_session_listens_nowhere() {
+        let _sockets = SOCKETS.lock().await;
         let before = listening_inodes();
         let settings = ZenohSettings {
             connect: vec![format!("tcp/127.0.0.1:{}", free_loopback_port().unwrap())],
