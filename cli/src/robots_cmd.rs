@@ -182,12 +182,7 @@ fn add(args: &AddArgs) -> anyhow::Result<()> {
         100.0 * inferred.foot_share,
         inferred.carriers
     );
-    // The legs' own warnings were printed with their table above.
-    for n in inferred
-        .notes
-        .iter()
-        .filter(|n| !inferred.legs.warnings.contains(n))
-    {
+    for n in &inferred.notes {
         println!("note: {n}");
     }
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;

@@ -142,7 +142,8 @@ pub struct Inference {
     /// Links other than the feet that carry weight at the settled pose (see
     /// [`crate::bench::StandReport::carriers`]).
     pub carriers: String,
-    /// Things a reviewer should know (loader repairs, filled-in limits).
+    /// Things a reviewer should know besides the legs' own warnings (`legs.warnings`: loader
+    /// repairs, mesh stand-ins): filled-in or replaced limits, a forced write.
     pub notes: Vec<String>,
 }
 

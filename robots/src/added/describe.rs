@@ -49,7 +49,8 @@ pub fn describe(
         .clone()
         .unwrap_or_else(|| sanitize_name(&model.name));
     check_name(&name)?;
-    let mut notes = legs.warnings.clone();
+    // The legs' own warnings stay in `legs` (its summary prints them).
+    let mut notes = Vec::new();
     let joints: Vec<_> = legs.joints().collect();
 
     // Rounded so that the file reads as written by hand (mrad, 0.1 N·m/rad, 0.01 N·m·s/rad).
