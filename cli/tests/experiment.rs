@@ -305,12 +305,23 @@ fn an_interrupted_experiment_resumes_finishes_and_reports() {
     assert!(report.contains("| spot | zero-shot l3p | 1 |"), "{report}");
     let readme = std::fs::read_to_string(exp.join("report/README.md")).unwrap();
     assert!(readme.contains("## Simple → complex terrain"), "{readme}");
-    // Iterations to the from-scratch final reward: 3 iterations end no episode, so no arm has a
-    // final reward and there is no bar to reach — the section is left out, not filled with NaN.
-    assert!(
-        !readme.contains("from-scratch final reward") && !readme.contains("NaN"),
+    // Iterations to the from-scratch final reward: in 3 iterations an episode ends only where a
+    // robot falls, which the physics decides (it differs between machines). The section is there
+    // exactly when a target robot's from-scratch arm has a final reward (the bar to reach), and
+    // is never filled with NaN.
+    let scratch_final_reward = report
+        .lines()
+        .filter(|line| {
+            line.starts_with("| go1 | l3p | 1 |") || line.starts_with("| spot | l3p | 1 |")
+        })
+        .filter_map(|line| line.split('|').nth(9))
+        .any(|final_reward| final_reward.contains('.'));
+    assert_eq!(
+        readme.contains("from-scratch final reward"),
+        scratch_final_reward,
         "{readme}"
     );
+    assert!(!readme.contains("NaN"), "{readme}");
     let radar = std::fs::read_to_string(exp.join("report/spot-terrains.svg")).unwrap();
     assert!(
         radar.contains("pyramid slope") && radar.contains("l3p-transfer (1 seeds)"),
