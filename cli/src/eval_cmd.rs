@@ -592,6 +592,18 @@ pub fn format_rows(rows: &[EvalRow]) -> String {
             }),
         ),
         (
+            "  first 2 s / after",
+            col(&|r| {
+                gait(r, &|g| {
+                    format!(
+                        "{:.1}° / {:.1}°",
+                        g.heading_start_change_rad.to_degrees(),
+                        g.heading_settled_drift_rad.to_degrees()
+                    )
+                })
+            }),
+        ),
+        (
             "walk criterion",
             col(&|r| {
                 if r.walk_failures.is_empty() {

@@ -8,7 +8,8 @@
 //! - share of steps in which any non-foot body (penalised links or the base) touches the ground;
 //! - joint-target change per control step, RMS over joints and steps (rad): the chatter measure;
 //! - mean |τ| (N·m) and mean mechanical power Σ|τ·q̇| (W);
-//! - per episode, the heading change (rad, unwrapped), meaningful with a zero yaw command;
+//! - per episode, the heading change (rad, unwrapped), meaningful with a zero yaw command, also split
+//!   into the first [`HEADING_START_SECONDS`] (the turn a standing start gives) and the rest;
 //! - mean base velocity in the heading frame (forward, left): tells a robot that is too slow from
 //!   one whose speed swings within each stride, which the tracking error alone cannot;
 //! - how episodes ended: time-out, or which termination (base contact, tilt, too low, non-finite),
@@ -64,8 +65,13 @@ pub struct GaitMeter {
     prev_contact: Option<[bool; NUM_FEET]>,
     prev_yaw: Option<f32>,
     episode_heading_change: f32,
+    /// Seconds into the current episode, and its heading change over the first
+    /// [`HEADING_START_SECONDS`].
+    episode_elapsed: f32,
+    episode_start_heading_change: f32,
     // finished episodes
     heading_changes: Vec<f32>,
+    start_heading_changes: Vec<f32>,
     episode_seconds: f64,
 }
 
@@ -145,9 +151,14 @@ impl GaitMeter {
         self.heading_vel_sum[0] += (cos * vx + sin * vy) as f64;
         self.heading_vel_sum[1] += (cos * vy - sin * vx) as f64;
         if let Some(prev) = self.prev_yaw {
-            self.episode_heading_change += wrap_to_pi(yaw - prev);
+            let change = wrap_to_pi(yaw - prev);
+            self.episode_heading_change += change;
+            if self.episode_elapsed < HEADING_START_SECONDS {
+                self.episode_start_heading_change += change;
+            }
         }
         self.prev_yaw = Some(yaw);
+        self.episode_elapsed += s.dt;
         self.episode_seconds += s.dt as f64;
     }
 
@@ -157,12 +168,16 @@ impl GaitMeter {
         self.endings.count(reason);
         if self.prev_yaw.is_some() {
             self.heading_changes.push(self.episode_heading_change);
+            self.start_heading_changes
+                .push(self.episode_start_heading_change);
         }
         self.prev_targets = None;
         self.prev_change = None;
         self.prev_contact = None;
         self.prev_yaw = None;
         self.episode_heading_change = 0.0;
+        self.episode_elapsed = 0.0;
+        self.episode_start_heading_change = 0.0;
     }
 
     /// Adds another meter's finished sums (per-episode state of `other` is ignored).
@@ -191,6 +206,8 @@ impl GaitMeter {
         }
         self.heading_changes
             .extend_from_slice(&other.heading_changes);
+        self.start_heading_changes
+            .extend_from_slice(&other.start_heading_changes);
         self.episode_seconds += other.episode_seconds;
     }
 
@@ -213,6 +230,19 @@ impl GaitMeter {
         let episodes = self.heading_changes.len().max(1) as f32;
         let drift = self.heading_changes.iter().map(|d| d.abs()).sum::<f32>() / episodes;
         let signed = self.heading_changes.iter().sum::<f32>() / episodes;
+        let start = self
+            .start_heading_changes
+            .iter()
+            .map(|d| d.abs())
+            .sum::<f32>()
+            / episodes;
+        let settled = self
+            .heading_changes
+            .iter()
+            .zip(&self.start_heading_changes)
+            .map(|(total, start)| (total - start).abs())
+            .sum::<f32>()
+            / episodes;
         GaitReport {
             steps: self.steps,
             base_height_mean: mean_h,
@@ -237,6 +267,8 @@ impl GaitMeter {
             mean_power: (self.power_sum / n) as f32,
             heading_drift_rad: drift,
             heading_change_mean_rad: signed,
+            heading_start_change_rad: start,
+            heading_settled_drift_rad: settled,
             mean_heading_velocity: self.heading_vel_sum.map(|v| (v / n) as f32),
         }
     }
@@ -287,6 +319,15 @@ pub struct GaitReport {
     /// heading wanders both ways. Absent in reports written before it existed.
     #[serde(default)]
     pub heading_change_mean_rad: f32,
+    /// Mean |heading change| over the first [`HEADING_START_SECONDS`] of an episode (rad): the
+    /// turn a standing start gives (the first stride's diagonal), which no later step undoes
+    /// without a heading signal. Absent in reports written before it existed.
+    #[serde(default)]
+    pub heading_start_change_rad: f32,
+    /// Mean |heading change| over the rest of an episode (rad): the drift of walking itself.
+    /// Absent in reports written before it existed.
+    #[serde(default)]
+    pub heading_settled_drift_rad: f32,
     /// Mean base velocity in the heading frame, [forward, left] (m/s). Absent in reports written
     /// before it existed.
     #[serde(default)]
@@ -465,6 +506,9 @@ fn below(a: f32, b: f32) -> bool {
     a < b
 }
 
+/// How long the start of an episode is, for [`GaitReport::heading_start_change_rad`].
+pub const HEADING_START_SECONDS: f32 = 2.0;
+
 /// Canonical foot order.
 pub const FOOT_NAMES: [&str; NUM_FEET] = ["FL", "FR", "RL", "RR"];
 
@@ -599,6 +643,30 @@ mod tests {
         );
     }
 
+    /// A start that turns left by 0.5 rad in its first second, then a straight stretch and a turn
+    /// right by 1 rad from the third second: the start and the rest are told apart, the total is
+    /// their sum.
+    #[test]
+    fn heading_change_splits_into_start_and_settled_parts() {
+        let mut meter = GaitMeter::new();
+        let mut state = SimState::default();
+        let mut yaw = 0.0f32;
+        for k in 0..=250 {
+            if (1..=50).contains(&k) {
+                yaw += 0.01;
+            } else if k > 150 {
+                yaw -= 0.01;
+            }
+            state.base_quat = quat_from_yaw(yaw);
+            meter.record(&sample(&state, &[0.0; NUM_JOINTS]));
+        }
+        meter.end_episode(DoneReason::TimeOut);
+        let r = meter.report(0.3);
+        assert!((r.heading_drift_rad - 0.5).abs() < 1e-3, "{r:?}");
+        assert!((r.heading_start_change_rad - 0.5).abs() < 1e-3, "{r:?}");
+        assert!((r.heading_settled_drift_rad - 1.0).abs() < 1e-3, "{r:?}");
+    }
+
     /// The base on the ground in 1 step of 4, three episodes ending three ways (and a `None`
     /// that is not an ending): the shares and the tally say why the policy fell.
     #[test]
@@ -674,6 +742,8 @@ mod tests {
             mean_power: 40.0,
             heading_drift_rad: 0.1,
             heading_change_mean_rad: 0.1,
+            heading_start_change_rad: 0.05,
+            heading_settled_drift_rad: 0.05,
             mean_heading_velocity: [0.5, 0.0],
         };
         let t = TrackingSummary {
