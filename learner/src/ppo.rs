@@ -540,17 +540,18 @@ impl Ppo {
         }
         let outs = self.model.net.actors(obs.clone());
         // The same minibatch mirrored left-right, for the symmetry loss.
-        let mirrored_outs = (self.cfg.symmetry_coef > 0.0).then(|| {
-            let mirrored = obs
-                .iter()
-                .zip(&self.mirrors)
-                .map(|(o, m)| match (o, m) {
-                    (Some(o), Some(m)) => Some(m.observations(o.clone())),
-                    _ => None,
-                })
-                .collect();
-            self.model.net.actors(mirrored)
-        });
+        let mirrored_outs =
+            (self.cfg.symmetry_coef > 0.0 && !self.critic_warming_up()).then(|| {
+                let mirrored = obs
+                    .iter()
+                    .zip(&self.mirrors)
+                    .map(|(o, m)| match (o, m) {
+                        (Some(o), Some(m)) => Some(m.observations(o.clone())),
+                        _ => None,
+                    })
+                    .collect();
+                self.model.net.actors(mirrored)
+            });
 
         let mut loss_sum: Option<Tensor<1>> = None;
         let mut parts = LossParts::default();
@@ -585,7 +586,10 @@ impl Ppo {
         if !(norm.is_finite() && parts.kl.is_finite()) {
             return Ok(None);
         }
-        self.lr = self.cfg.adapt_lr(self.lr, parts.kl);
+        if !self.critic_warming_up() {
+            // While the actor stands still its KL is 0, which would raise the rate to its cap.
+            self.lr = self.cfg.adapt_lr(self.lr, parts.kl);
+        }
         let net = std::mem::replace(&mut self.model.net, placeholder_net());
         self.model.net = self.optim.step(self.lr, net, grads);
         Ok(Some((parts, norm)))
@@ -607,6 +611,7 @@ impl Ppo {
     ) -> Result<(Tensor<1>, LossParts), LearnerError> {
         let cfg = &self.cfg;
         let heads = &self.model.net.robots[robot];
+        let warming_up = self.critic_warming_up();
         let mut parts = LossParts {
             kl: scalar(approx_kl(
                 out.mean.clone().detach(),
@@ -637,6 +642,12 @@ impl Ppo {
         parts.surrogate = scalar(surrogate.clone().detach())?;
         parts.value = scalar(value_loss.clone().detach())?;
         parts.entropy = scalar(entropy.clone().detach())?;
+        if warming_up {
+            // Only the critic learns: no term that reaches the actor's parameters.
+            let loss = value_loss.mul_scalar(cfg.value_loss_coef);
+            parts.total = scalar(loss.clone().detach())?;
+            return Ok((loss, parts));
+        }
         let mut loss = surrogate
             .add(value_loss.mul_scalar(cfg.value_loss_coef))
             .sub(entropy.mul_scalar(cfg.entropy_coef));
@@ -681,6 +692,11 @@ impl Ppo {
         }
         parts.total = scalar(loss.clone().detach())?;
         Ok((loss, parts))
+    }
+
+    /// Whether this update trains only the critic (`critic_warmup_iterations`).
+    fn critic_warming_up(&self) -> bool {
+        self.iteration < self.cfg.critic_warmup_iterations
     }
 
     /// Counts updates in which every step was skipped; too many in a row is an error (the last

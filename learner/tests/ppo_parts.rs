@@ -352,6 +352,55 @@ fn mapped_heads_fold_the_maps_into_the_copy() {
     }
 }
 
+/// Critic warm-up on a transferred L3P policy: for its first updates only the critic learns (the
+/// actor's means and std stay bit-identical, the learning rate does not climb on the zero KL),
+/// then the actor trains as usual.
+#[test]
+fn critic_warmup_trains_only_the_critic_then_the_actor() {
+    let src = fresh_model(Mode::L3p, "a1");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("a1.ckpt");
+    ppo_for(Mode::L3p, src).save(&path).unwrap();
+    let model = transferred_model(Mode::L3pTransfer, "pm", &path, TransferHeads::Fresh).unwrap();
+    let cfg = PpoConfig {
+        mode: Mode::L3pTransfer,
+        critic_warmup_iterations: 2,
+        ..Default::default()
+    };
+    let mut ppo = Ppo::new(cfg, model, train_device()).unwrap();
+    let obs: Vec<f32> = (0..OBS).map(|i| i as f32 * 0.1).collect();
+    let mean_before = ppo.model().act_mean_host(0, &obs).unwrap();
+    let heads_before = head_bytes(ppo.model());
+    let critic = |ppo: &Ppo| {
+        ppo.model().net.robots[0]
+            .critic
+            .to_host()
+            .into_iter()
+            .flat_map(|(w, b, _, _)| w.into_iter().chain(b))
+            .collect::<Vec<f32>>()
+    };
+    let critic_before = critic(&ppo);
+    let mut env = PointMass::new(32, 1);
+    let mut rng = StdRng::seed_from_u64(2);
+    for _ in 0..2 {
+        let m = ppo
+            .update(&collect(ppo.model(), &mut env, 8, &mut rng))
+            .unwrap();
+        assert_eq!(m.learning_rate, 1e-3, "the rate adapted while warming up");
+        assert_eq!(m.mean_std, 1.0, "the std trained while warming up");
+    }
+    assert_eq!(ppo.model().act_mean_host(0, &obs).unwrap(), mean_before);
+    assert_eq!(head_bytes(ppo.model()), heads_before);
+    assert_ne!(critic(&ppo), critic_before, "the critic did not train");
+    ppo.update(&collect(ppo.model(), &mut env, 8, &mut rng))
+        .unwrap();
+    assert_ne!(
+        head_bytes(ppo.model()),
+        heads_before,
+        "the actor did not train after the warm-up"
+    );
+}
+
 #[test]
 fn l3p_mode_trains_the_core_and_mlp_transfer_starts_from_the_checkpoint() {
     let model = fresh_model(Mode::L3p, "pm");

@@ -131,6 +131,10 @@ pub struct PpoConfig {
     pub smoothness_order: u8,
     /// Units of the smoothness loss's differences: the raw action, or joint targets in rad.
     pub smoothness_space: SmoothnessSpace,
+    /// Updates at the start of a run that train only the critic (value loss; the actor, its std
+    /// and the recovery modules untouched, the learning rate not adapted): a transferred actor
+    /// that already walks is not pushed around by the advantages of a fresh critic. 0 = off.
+    pub critic_warmup_iterations: u64,
 }
 
 impl Default for PpoConfig {
@@ -159,6 +163,7 @@ impl Default for PpoConfig {
             smoothness_coef: 0.0,
             smoothness_order: 1,
             smoothness_space: SmoothnessSpace::Action,
+            critic_warmup_iterations: 0,
         }
     }
 }
