@@ -6,7 +6,7 @@
 use std::time::Duration;
 
 use clap::Args;
-use l3p_net::{Exposure, open_session};
+use l3p_net::{DEFAULT_RX_BUFFER_SIZE, Exposure, open_session};
 
 use crate::runtime::{self, NetArgs};
 
@@ -46,6 +46,13 @@ pub fn run(args: RouterArgs) -> anyhow::Result<()> {
             tracing::warn!("routing over unauthenticated links (--insecure): {why}");
         }
         Exposure::Local | Exposure::Authenticated => {}
+    }
+    if let Some(bytes) = settings.oversized_rx_buffer()? {
+        tracing::warn!(
+            "transport/link/rx/buffer_size is {bytes} bytes: Zenoh allocates that much for every \
+             link a client opens, so a router whose clients reconnect grows by up to that much \
+             each time; leave it at Zenoh's default ({DEFAULT_RX_BUFFER_SIZE})"
+        );
     }
     runtime::tokio_runtime()?.block_on(async move {
         let cancel = runtime::cancel_on_signal();

@@ -37,14 +37,20 @@ fn get(config: &Config, key: &str) -> Value {
     serde_json::from_str(&text).unwrap_or_else(|e| panic!("{key}: {e}: {text}"))
 }
 
-#[test]
-fn every_zenoh_config_parses() {
+/// Every `deploy/zenoh/*.json5`, sorted.
+fn json5_files() -> Vec<PathBuf> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(deploy_dir().join("zenoh"))
         .expect("deploy/zenoh exists")
         .map(|entry| entry.expect("readable dir entry").path())
         .filter(|path| path.extension().is_some_and(|ext| ext == "json5"))
         .collect();
     files.sort();
+    files
+}
+
+#[test]
+fn every_zenoh_config_parses() {
+    let files = json5_files();
     let names: BTreeSet<String> = files
         .iter()
         .map(|p| p.file_name().unwrap().to_string_lossy().into_owned())
@@ -67,6 +73,23 @@ fn every_zenoh_config_parses() {
         assert!(
             ["router", "peer", "client"].contains(&mode.as_str().unwrap_or("")),
             "{}: mode {mode}",
+            file.display()
+        );
+    }
+}
+
+/// Zenoh allocates `transport/link/rx/buffer_size` of receive buffers up front for every link: a
+/// router with 16 MiB there grew by megabytes per client reconnect, +109 MiB/h in the one-hour soak
+/// (BENCHMARKS.md). Every shipped file keeps Zenoh's default, one batch; `l3p router` warns about
+/// more.
+#[test]
+fn no_config_allocates_more_than_one_batch_per_link() {
+    for file in json5_files() {
+        let size = get(&load(&file), "transport/link/rx/buffer_size");
+        assert!(
+            size.as_u64()
+                .is_some_and(|bytes| bytes <= l3p_net::DEFAULT_RX_BUFFER_SIZE),
+            "{}: rx buffer_size {size}",
             file.display()
         );
     }

@@ -84,6 +84,10 @@ impl Default for ZenohSettings {
 /// a one-shot command with a wrong endpoint seems to hang.
 pub const DEFAULT_CONNECT_RETRY_S: u64 = 10;
 
+/// Zenoh's default `transport/link/rx/buffer_size`: one batch (see
+/// [`ZenohSettings::oversized_rx_buffer`]).
+pub const DEFAULT_RX_BUFFER_SIZE: u64 = 65_535;
+
 impl ZenohSettings {
     /// Loopback-only peer: listens on 127.0.0.1 (port `listen`, or any free one — never Zenoh's
     /// default of every interface), connects to `connect`, no scouting.
@@ -199,6 +203,22 @@ impl ZenohSettings {
         } else {
             Exposure::Local
         })
+    }
+
+    /// The receive buffers Zenoh would allocate up front for every link of a session opened with
+    /// these settings (`transport/link/rx/buffer_size` of the final config), in bytes, when that is
+    /// more than Zenoh's default of one batch ([`DEFAULT_RX_BUFFER_SIZE`]); `None` otherwise. A
+    /// router allocates them again for every link a client opens, and the allocator keeps much of
+    /// what a closed link frees: at 16 MiB, a router whose clients reconnect every few seconds grew
+    /// by megabytes per reconnect (BENCHMARKS.md, the one-hour soak). Large messages need no larger
+    /// value: Zenoh allocates receive buffers beyond the pool as it needs them.
+    pub fn oversized_rx_buffer(&self) -> Result<Option<u64>, NetError> {
+        let size = self
+            .to_zenoh_config()?
+            .get_json("transport/link/rx/buffer_size")
+            .ok()
+            .and_then(|text| text.trim().parse::<u64>().ok());
+        Ok(size.filter(|&bytes| bytes > DEFAULT_RX_BUFFER_SIZE))
     }
 }
 
@@ -484,6 +504,26 @@ mod tests {
             ..ZenohSettings::default()
         };
         assert_eq!(exposure(&settings), Exposure::Authenticated);
+    }
+
+    /// A receive buffer above one batch, set in a Zenoh config file, is reported; the default is not.
+    #[test]
+    fn an_oversized_receive_buffer_is_reported() {
+        let dir = tempfile::tempdir().unwrap();
+        let file = dir.path().join("router.json5");
+        std::fs::write(
+            &file,
+            "{ transport: { link: { rx: { buffer_size: 16777216 } } } }",
+        )
+        .unwrap();
+        let mut settings = ZenohSettings {
+            mode: "router".into(),
+            config_file: Some(file),
+            ..ZenohSettings::default()
+        };
+        assert_eq!(settings.oversized_rx_buffer().unwrap(), Some(16_777_216));
+        settings.config_file = None;
+        assert_eq!(settings.oversized_rx_buffer().unwrap(), None);
     }
 
     /// A client started before its router waits for it (`connect_retry_s`); with 0 it fails at once.
