@@ -47,7 +47,8 @@ pub struct TrainingFlags {
     /// physics at 5 ms whatever the training's step; 0.5
     /// only once 1.0 passes) and stop as soon as it holds (every check is appended to `<run_dir>/walk_checks.jsonl`); prints
     /// and writes `<run_dir>/walk.json` (wall-clock, samples,
-    /// iterations, the evaluation).
+    /// iterations, the evaluation). With `[ppo] symmetrize_export` the checked (and written)
+    /// policy is the one averaged with its mirror image.
     #[arg(long)]
     pub until_walks: bool,
     /// With --until-walks: a check that passes is repeated in MuJoCo (`l3p sim2sim` on the
@@ -207,6 +208,7 @@ pub fn walk_check_export(
     export: Vec<u8>,
 ) -> anyhow::Result<(Vec<crate::eval_cmd::EvalRow>, bool)> {
     let robot = first_robot(config)?;
+    let export = deployable(config, robot, export)?;
     let policy = l3p_policy::DeployPolicy::from_bytes(&export)?;
     let check = check_policy(0, export, robot, &policy, walk_env(config, robot)?)?;
     let walks = check.walks();
@@ -322,7 +324,22 @@ fn latest_export(
         l3p_policy::load_checkpoint(&daemon::checkpoint_path(run_dir), &l3p_policy::cpu_device())?;
     let robot = first_robot(config)?;
     let (bytes, _) = l3p_policy::export_bytes(&ckpt.model, robot.name)?;
-    Ok((ckpt.iteration, robot, bytes))
+    Ok((ckpt.iteration, robot, deployable(config, robot, bytes)?))
+}
+
+/// The export a run deploys: as trained, or averaged with its mirror image when
+/// `[ppo] symmetrize_export` is set.
+fn deployable(
+    config: &Config,
+    robot: &l3p_robots::catalog::RobotSpec,
+    export: Vec<u8>,
+) -> anyhow::Result<Vec<u8>> {
+    if !config.ppo.symmetrize_export {
+        return Ok(export);
+    }
+    let policy = l3p_policy::DeployPolicy::from_bytes(&export)?;
+    let mirror = crate::eval_cmd::mirror_policy(&policy, robot)?;
+    Ok(policy.averaged(&mirror)?.to_bytes()?)
 }
 
 /// Logs a rollout of the latest checkpoint into the `--rerun` stream.
@@ -796,4 +813,47 @@ fn append_line(path: &std::path::Path, line: &str) -> std::io::Result<()> {
         .append(true)
         .open(path)?;
     writeln!(f, "{line}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `[ppo] symmetrize_export`: the walk check's policy is its own mirror image (a zero yaw
+    /// command cannot turn it on a symmetric robot); off, the export is the one trained.
+    #[test]
+    fn a_symmetrized_deployable_is_its_own_mirror_image() {
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../docs/a1-flat-session27/policy");
+        let trained = std::fs::read(dir.join("policy.safetensors")).unwrap();
+        let robot = l3p_robots::catalog::RobotSpec::by_name("a1").unwrap();
+        let mut config = Config::default();
+        assert_eq!(
+            deployable(&config, robot, trained.clone()).unwrap(),
+            trained
+        );
+
+        config.ppo.symmetrize_export = true;
+        let bytes = deployable(&config, robot, trained.clone()).unwrap();
+        let symmetric = l3p_policy::DeployPolicy::from_bytes(&bytes).unwrap();
+        let mirror = crate::eval_cmd::mirror_policy(&symmetric, robot).unwrap();
+        let original = l3p_policy::DeployPolicy::from_bytes(&trained).unwrap();
+        let original_mirror = crate::eval_cmd::mirror_policy(&original, robot).unwrap();
+        let obs: Vec<f32> = (0..symmetric.obs_dim())
+            .map(|i| ((i * 7919) % 13) as f32 / 13.0 - 0.5)
+            .collect();
+        let (a, m) = (symmetric.act(&obs).unwrap(), mirror.act(&obs).unwrap());
+        for (x, y) in a.iter().zip(&m) {
+            assert!((x - y).abs() < 1e-4, "{a:?} vs its mirror {m:?}");
+        }
+        // …and it is not the trained policy, which is only nearly symmetric.
+        let (o, om) = (
+            original.act(&obs).unwrap(),
+            original_mirror.act(&obs).unwrap(),
+        );
+        assert!(
+            o.iter().zip(&om).any(|(x, y)| (x - y).abs() > 1e-3),
+            "{o:?}"
+        );
+    }
 }

@@ -135,6 +135,11 @@ pub struct PpoConfig {
     /// and the recovery modules untouched, the learning rate not adapted): a transferred actor
     /// that already walks is not pushed around by the advantages of a fresh critic. 0 = off.
     pub critic_warmup_iterations: u64,
+    /// The deployable policy is the trained one averaged with its left-right mirror image,
+    /// `½(π(o) + M_a π(M_o o))` (`l3p export --symmetrized`): exactly symmetric, so a zero yaw
+    /// command does not turn it on a symmetric robot. `l3p train --until-walks` checks (and writes
+    /// to `walked/`) that policy. The mirror loss (`symmetry_coef`) keeps the two halves close.
+    pub symmetrize_export: bool,
 }
 
 impl Default for PpoConfig {
@@ -164,6 +169,7 @@ impl Default for PpoConfig {
             smoothness_order: 1,
             smoothness_space: SmoothnessSpace::Action,
             critic_warmup_iterations: 0,
+            symmetrize_export: false,
         }
     }
 }
