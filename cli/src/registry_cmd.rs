@@ -59,6 +59,14 @@ pub enum RegistryCommand {
         /// uses, as the learner and actors do; the flags above override it.
         #[arg(long)]
         config: Option<PathBuf>,
+        /// Keep the database bounded while serving: at start and every --gc-every-s seconds,
+        /// remove what `l3p registry gc --keep <N>` would (off without this flag). A failed pass
+        /// is logged and the service goes on.
+        #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+        gc_keep: Option<u64>,
+        /// Seconds between the service's gc passes (with --gc-keep).
+        #[arg(long, default_value_t = 3600, value_parser = clap::value_parser!(u64).range(1..))]
+        gc_every_s: u64,
     },
     /// List stored versions.
     List {
@@ -185,6 +193,8 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             scouting,
             zenoh_config,
             config,
+            gc_keep,
+            gc_every_s,
         } => {
             let mut settings = match &config {
                 Some(path) => crate::config::Config::load(path)?.zenoh,
@@ -203,7 +213,11 @@ async fn run_async(command: RegistryCommand) -> anyhow::Result<()> {
             if zenoh_config.is_some() {
                 settings.config_file = zenoh_config;
             }
-            serve(&data, settings).await
+            let gc = gc_keep.map(|keep| ServiceGc {
+                keep,
+                every: std::time::Duration::from_secs(gc_every_s),
+            });
+            serve(&data, settings, gc).await
         }
         RegistryCommand::List {
             kind,
@@ -446,11 +460,51 @@ fn print_gc(path: &Path, r: &GcReport) {
     }
 }
 
-async fn serve(data: &Path, settings: ZenohSettings) -> anyhow::Result<()> {
+/// `registry serve --gc-keep`: the retention the service applies, and how often.
+#[derive(Debug, Clone, Copy)]
+struct ServiceGc {
+    keep: u64,
+    every: std::time::Duration,
+}
+
+/// Applies `gc` at once and then every `gc.every` until `cancel`; each pass on the blocking pool
+/// (SQLite's locking keeps it safe beside the service's own requests), its outcome logged.
+async fn gc_periodically(
+    registry: Arc<Registry>,
+    gc: ServiceGc,
+    cancel: tokio_util::sync::CancellationToken,
+) {
+    let mut ticks = tokio::time::interval(gc.every);
+    ticks.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+    loop {
+        tokio::select! {
+            _ = cancel.cancelled() => return,
+            _ = ticks.tick() => {}
+        }
+        let r = registry.clone();
+        let policy = RetentionPolicy { keep_last: gc.keep };
+        match tokio::task::spawn_blocking(move || r.gc(&policy, false)).await {
+            Ok(Ok(report)) => tracing::info!(
+                keep = gc.keep,
+                versions_removed = report.versions_removed,
+                blob_bytes_removed = report.blob_bytes_removed,
+                file_bytes_after = report.file_bytes_after,
+                "registry gc"
+            ),
+            Ok(Err(e)) => tracing::warn!("registry gc failed (the service goes on): {e:#}"),
+            Err(e) => tracing::warn!("registry gc task failed (the service goes on): {e}"),
+        }
+    }
+}
+
+async fn serve(data: &Path, settings: ZenohSettings, gc: Option<ServiceGc>) -> anyhow::Result<()> {
     let registry = Arc::new(Registry::open(data)?);
     let session = open_session(&settings).await?;
     // Ctrl-C or SIGTERM (systemd, a supervisor) stop the service cleanly.
     let cancel = crate::runtime::cancel_on_signal();
+    if let Some(gc) = gc {
+        tokio::spawn(gc_periodically(registry.clone(), gc, cancel.clone()));
+    }
     eprintln!(
         "registry {} serving on {:?} (connected to {:?})",
         registry.path().display(),

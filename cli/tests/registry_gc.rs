@@ -135,3 +135,49 @@ fn gc_on_a_missing_or_corrupt_database_is_a_clear_error() {
     assert!(msg.contains("--keep"), "{msg}");
     assert!(!msg.contains("panicked"), "{msg}");
 }
+
+/// `l3p registry serve --gc-keep 5 --gc-every-s 1`: the service applies the retention at start and
+/// again to versions stored while it runs, and keeps serving.
+#[test]
+fn the_service_applies_retention_while_it_serves() {
+    let dir = tempfile::tempdir().unwrap();
+    fixture(dir.path());
+    let port = l3p_net::free_loopback_port().unwrap();
+    let log = std::fs::File::create(dir.path().join("serve.log")).unwrap();
+    let mut service = Command::new(env!("CARGO_BIN_EXE_l3p"))
+        .args(["registry", "serve", "--data-dir"])
+        .arg(dir.path())
+        .args(["--listen", &format!("tcp/127.0.0.1:{port}")])
+        .args(["--gc-keep", "5", "--gc-every-s", "1"])
+        .env("RUST_LOG", "info")
+        .stdout(log.try_clone().unwrap())
+        .stderr(log)
+        .spawn()
+        .unwrap();
+    let wait_for = |want: &[u64]| {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(60);
+        while run_versions(dir.path()) != want {
+            assert!(
+                std::time::Instant::now() < deadline,
+                "versions {:?}, want {want:?}; log:\n{}",
+                run_versions(dir.path()),
+                std::fs::read_to_string(dir.path().join("serve.log")).unwrap_or_default()
+            );
+            std::thread::sleep(std::time::Duration::from_millis(100));
+        }
+    };
+    wait_for(&[2, 3, 8, 9, 10, 11, 12]);
+    let reg = Registry::open(dir.path()).unwrap();
+    for i in 13..=15 {
+        reg.put(ckpt("run", i)).unwrap();
+    }
+    wait_for(&[2, 3, 11, 12, 13, 14, 15]);
+    assert!(service.try_wait().unwrap().is_none(), "the service stopped");
+    service.kill().unwrap();
+    service.wait().unwrap();
+    let log = std::fs::read_to_string(dir.path().join("serve.log")).unwrap();
+    assert!(
+        log.contains("registry gc") && log.contains("versions_removed"),
+        "{log}"
+    );
+}
