@@ -40,7 +40,7 @@ pub fn learner_options(config: &Config, use_registry: bool) -> anyhow::Result<Le
         use_registry,
         steps_per_env: config.rollout.steps_per_env,
         obs_clip: config.env.obs_clip,
-        mirrors: if config.ppo.symmetry_coef > 0.0 {
+        mirrors: if config.ppo.symmetry_coef > 0.0 || config.ppo.symmetrize_export {
             robots
                 .iter()
                 .map(|r| Ok((r.name.to_string(), runtime::mirror(config, r)?)))

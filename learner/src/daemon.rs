@@ -308,7 +308,7 @@ fn save_checkpoint(
     }
     let mut deploys = Vec::with_capacity(opts.robots.len());
     for spec in &opts.robots {
-        let (export, config) = ppo.export(&spec.name)?;
+        let (export, config) = ppo.deploy_export(&spec.name)?;
         let req = PutRequest::new(
             &deploy_artifact(&opts.run, &spec.name),
             ArtifactKind::Deploy,

@@ -113,6 +113,8 @@ struct MirrorTensors {
     obs_sign: Tensor<2>,
     action_index: Tensor<1, Int>,
     action_sign: Tensor<2>,
+    /// The maps themselves, for a symmetrized export.
+    host: Mirror,
 }
 
 impl MirrorTensors {
@@ -242,6 +244,7 @@ impl Ppo {
             obs_sign: self.tensor2(mirror.obs_sign.clone(), 1, spec.obs_dim),
             action_index: index(&mirror.action_index),
             action_sign: self.tensor2(mirror.action_sign.clone(), 1, spec.action_dim),
+            host: mirror.clone(),
         });
         Ok(())
     }
@@ -323,6 +326,32 @@ impl Ppo {
     /// Export one robot's deployable policy (safetensors + JSON config in one blob).
     pub fn export(&self, robot: &str) -> Result<(Vec<u8>, l3p_policy::ExportConfig), LearnerError> {
         Ok(l3p_policy::export_bytes(&self.model, robot)?)
+    }
+
+    /// The policy a run deploys for `robot` (its registry deploy artifacts): [`export`](Self::export),
+    /// averaged with its left-right mirror image when `symmetrize_export` is set (an error without
+    /// the robot's mirror maps). The actors keep rolling out the trained policy: PPO is on-policy.
+    pub fn deploy_export(
+        &self,
+        robot: &str,
+    ) -> Result<(Vec<u8>, l3p_policy::ExportConfig), LearnerError> {
+        let (bytes, config) = self.export(robot)?;
+        if !self.cfg.symmetrize_export {
+            return Ok((bytes, config));
+        }
+        let i = self.model.robot_index(robot)?;
+        let m = &self.mirrors[i]
+            .as_ref()
+            .ok_or_else(|| {
+                LearnerError::Config(format!(
+                    "ppo.symmetrize_export = true but robot {robot} has no mirror maps"
+                ))
+            })?
+            .host;
+        let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
+        let mirror = policy.permuted(&m.obs_index, &m.obs_sign, &m.action_index, &m.action_sign)?;
+        let symmetric = policy.averaged(&mirror)?;
+        Ok((symmetric.to_bytes()?, symmetric.config))
     }
 
     fn tensor2(&self, v: Vec<f32>, rows: usize, cols: usize) -> Tensor<2> {

@@ -776,3 +776,55 @@ fn a_symmetry_loss_without_a_valid_mirror_is_a_clear_error() {
     ppo.set_mirror("pm", &point_mass_mirror()).unwrap();
     ppo.update(&batch).unwrap();
 }
+
+/// `symmetrize_export`: the deploy artifact is the policy averaged with its mirror image (its own
+/// mirror image: `π(M_o o) = M_a π(o)`), the weights the actors roll out stay the trained ones,
+/// and without mirror maps it is a clear error.
+#[test]
+fn a_symmetrized_deploy_export_is_its_own_mirror_image() {
+    let cfg = PpoConfig {
+        mode: Mode::Mlp,
+        symmetrize_export: true,
+        ..Default::default()
+    };
+    let mut ppo = Ppo::new(cfg, fresh_model(Mode::Mlp, "pm"), train_device()).unwrap();
+    let err = ppo.deploy_export("pm").unwrap_err().to_string();
+    assert!(
+        err.contains("symmetrize_export") && err.contains("mirror"),
+        "{err}"
+    );
+
+    let m = point_mass_mirror();
+    ppo.set_mirror("pm", &m).unwrap();
+    let (bytes, _) = ppo.deploy_export("pm").unwrap();
+    let symmetric = l3p_policy::DeployPolicy::from_bytes(&bytes).unwrap();
+    let (trained_bytes, _) = ppo.export("pm").unwrap();
+    let trained = l3p_policy::DeployPolicy::from_bytes(&trained_bytes).unwrap();
+    let flip = |v: &[f32], index: &[usize], sign: &[f32]| -> Vec<f32> {
+        index.iter().zip(sign).map(|(&j, s)| s * v[j]).collect()
+    };
+    let mut asymmetric = 0.0f32;
+    for k in 0..8 {
+        let obs: Vec<f32> = (0..OBS)
+            .map(|i| ((i + 3 * k) % 5) as f32 * 0.3 - 0.6)
+            .collect();
+        let mirrored_obs = flip(&obs, &m.obs_index, &m.obs_sign);
+        let want = flip(
+            &symmetric.act(&obs).unwrap(),
+            &m.action_index,
+            &m.action_sign,
+        );
+        let got = symmetric.act(&mirrored_obs).unwrap();
+        for (g, w) in got.iter().zip(&want) {
+            assert!((g - w).abs() < 1e-5, "{got:?} vs {want:?}");
+        }
+        let t_want = flip(&trained.act(&obs).unwrap(), &m.action_index, &m.action_sign);
+        let t_got = trained.act(&mirrored_obs).unwrap();
+        asymmetric += t_got
+            .iter()
+            .zip(&t_want)
+            .map(|(g, w)| (g - w).abs())
+            .sum::<f32>();
+    }
+    assert!(asymmetric > 1e-3, "the fresh policy was already symmetric");
+}

@@ -137,8 +137,10 @@ pub struct PpoConfig {
     pub critic_warmup_iterations: u64,
     /// The deployable policy is the trained one averaged with its left-right mirror image,
     /// `½(π(o) + M_a π(M_o o))` (`l3p export --symmetrized`): exactly symmetric, so a zero yaw
-    /// command does not turn it on a symmetric robot. `l3p train --until-walks` checks (and writes
-    /// to `walked/`) that policy. The mirror loss (`symmetry_coef`) keeps the two halves close.
+    /// command does not turn it on a symmetric robot. The run's registry deploy artifacts are that
+    /// policy ([`Ppo::deploy_export`](crate::Ppo::deploy_export)) and `l3p train --until-walks` checks (and writes to
+    /// `walked/`) it; the actors roll out the trained one. The mirror loss (`symmetry_coef`) keeps
+    /// the two halves close.
     pub symmetrize_export: bool,
 }
 
