@@ -239,7 +239,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     let (export, export_config) = if args.symmetrized {
         let policy = l3p_policy::DeployPolicy::from_bytes(&export)?;
         let robot = l3p_robots::catalog::RobotSpec::by_name(&policy.config.robot)?;
-        let symmetric = policy.averaged(&crate::eval_cmd::mirror_policy(&policy, robot)?)?;
+        let symmetric = crate::eval_cmd::symmetrized_policy(&policy, robot)?;
         (symmetric.to_bytes()?, symmetric.config)
     } else {
         (export, export_config)

@@ -340,6 +340,14 @@ pub(crate) fn mirror_policy(
     )?)
 }
 
+/// `policy` averaged with its left-right mirror image on `robot`: exactly symmetric.
+pub(crate) fn symmetrized_policy(
+    policy: &DeployPolicy,
+    robot: &l3p_robots::catalog::RobotSpec,
+) -> anyhow::Result<DeployPolicy> {
+    Ok(policy.averaged(&mirror_policy(policy, robot)?)?)
+}
+
 pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let mut config = match &args.config {
         Some(path) => Config::load(path)?,
@@ -371,7 +379,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     let policy = if args.mirrored {
         mirror_policy(&policy, robot)?
     } else if args.symmetrized {
-        policy.averaged(&mirror_policy(&policy, robot)?)?
+        symmetrized_policy(&policy, robot)?
     } else {
         policy
     };

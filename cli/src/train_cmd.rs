@@ -338,8 +338,7 @@ fn deployable(
         return Ok(export);
     }
     let policy = l3p_policy::DeployPolicy::from_bytes(&export)?;
-    let mirror = crate::eval_cmd::mirror_policy(&policy, robot)?;
-    Ok(policy.averaged(&mirror)?.to_bytes()?)
+    Ok(crate::eval_cmd::symmetrized_policy(&policy, robot)?.to_bytes()?)
 }
 
 /// Logs a rollout of the latest checkpoint into the `--rerun` stream.

@@ -341,6 +341,19 @@ impl DeployPolicy {
         Ok(out)
     }
 
+    /// This policy averaged ([`averaged`](Self::averaged)) with its image under the maps of
+    /// [`permuted`](Self::permuted): with a left-right mirror's maps, the exactly symmetric policy
+    /// (`l3p export --symmetrized`, `[ppo] symmetrize_export`).
+    pub fn symmetrized(
+        &self,
+        obs_index: &[usize],
+        obs_sign: &[f32],
+        action_index: &[usize],
+        action_sign: &[f32],
+    ) -> Result<Self, PolicyError> {
+        self.averaged(&self.permuted(obs_index, obs_sign, action_index, action_sign)?)
+    }
+
     /// The mean of two policies of the same shape, `½(π_a(o) + π_b(o))`, as one MLP of twice the
     /// width: the two hidden stacks side by side (block-diagonal weights; each block keeps its
     /// activation) and the last layer summing both halves. With `other` this policy's mirror image

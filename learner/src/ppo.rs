@@ -348,9 +348,12 @@ impl Ppo {
                 ))
             })?
             .host;
-        let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
-        let mirror = policy.permuted(&m.obs_index, &m.obs_sign, &m.action_index, &m.action_sign)?;
-        let symmetric = policy.averaged(&mirror)?;
+        let symmetric = l3p_policy::DeployPolicy::from_bytes(&bytes)?.symmetrized(
+            &m.obs_index,
+            &m.obs_sign,
+            &m.action_index,
+            &m.action_sign,
+        )?;
         Ok((symmetric.to_bytes()?, symmetric.config))
     }
 
