@@ -1,7 +1,7 @@
 //! Deploy end to end over real processes on loopback Zenoh: `l3p registry serve`, `l3p sim-robot`
 //! and `l3p deploy`. A policy trained by `l3p train configs/a1-flat.toml --until-walks` (session 13:
 //! 20 ms physics, seed 2, meets the walk criterion in 5 ms physics at iteration 140; exported under
-//! docs/a1-flat-session27/policy) walks the simulated A1, stepping at 5 ms, at a normal height; when
+//! docs/a1-flat-session31/policy) walks the simulated A1, stepping at 5 ms, at a normal height; when
 //! the state stream stops the controller damps within 3 periods and stays damped until `l3p operate resume`; a NaN-producing policy is damped;
 //! a policy for another robot is refused before any command is sent.
 
@@ -33,7 +33,7 @@ fn tolerant_deploy_config(dir: &Path) -> PathBuf {
 
 fn trained_policy() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../docs/a1-flat-session27/policy/policy.safetensors")
+        .join("../docs/a1-flat-session31/policy/policy.safetensors")
 }
 
 /// What the test saw on the robot's keys, in arrival order.

@@ -143,7 +143,7 @@ fn bad_operator(rng: &mut Rng, k: usize) -> Vec<u8> {
 
 fn trained_policy() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../docs/a1-flat-session27/policy/policy.safetensors")
+        .join("../docs/a1-flat-session31/policy/policy.safetensors")
 }
 
 fn l3p(args: &[&str]) -> std::process::Output {

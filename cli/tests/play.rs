@@ -1,6 +1,6 @@
 //! `l3p play --save`: the `.rrd` it writes is read back with the pinned Rerun SDK (its chunk store)
 //! and holds the robot's bodies with one transform per control step, the time series, the contact
-//! arrows and the summary. Uses the shipped walking A1 policy (docs/a1-flat-session27/policy).
+//! arrows and the summary. Uses the shipped walking A1 policy (docs/a1-flat-session31/policy).
 #![cfg(feature = "rerun")]
 
 use std::collections::{BTreeMap, BTreeSet};
@@ -13,7 +13,7 @@ mod common;
 use common::TINY_FLAT_TASK;
 
 fn policy() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session27/policy")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session31/policy")
 }
 
 /// Per entity: rows on the `step` timeline, and whether it has static data.

@@ -46,7 +46,7 @@ fn sim2sim_plays_the_shipped_export_on_its_own_urdf() {
     if !mujoco_available("sim2sim_plays_the_shipped_export_on_its_own_urdf") {
         return;
     }
-    let export = root().join("docs/a1-flat-session27/policy");
+    let export = root().join("docs/a1-flat-session31/policy");
     let out = Command::new(env!("CARGO_BIN_EXE_l3p"))
         .arg("sim2sim")
         .arg("--policy")
@@ -92,7 +92,7 @@ fn sim2sim_refuses_a_missing_model_clearly() {
     let out = Command::new(env!("CARGO_BIN_EXE_l3p"))
         .arg("sim2sim")
         .arg("--policy")
-        .arg(root().join("docs/a1-flat-session27/policy"))
+        .arg(root().join("docs/a1-flat-session31/policy"))
         .args(["--model", "/nonexistent/robot.xml"])
         .output()
         .unwrap();

@@ -14,7 +14,7 @@ use l3p_robots::catalog::RobotSpec;
 
 fn trained_policy() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../docs/a1-flat-session27/policy/policy.safetensors")
+        .join("../docs/a1-flat-session31/policy/policy.safetensors")
 }
 
 fn lean() -> Command {

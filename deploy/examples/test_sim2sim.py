@@ -24,7 +24,7 @@ ROOT = HERE.parent.parent
 sys.path.insert(0, str(HERE))
 import sim2sim  # noqa: E402
 
-EXPORT = ROOT / "docs/a1-flat-session27/policy"
+EXPORT = ROOT / "docs/a1-flat-session31/policy"
 A1_URDF = ROOT / "robots/assets/a1.urdf"
 
 
