@@ -541,23 +541,7 @@ fn finish_arm(
 /// pretrained core and the arm's transfer heads, seeded as the learner seeds them), before any
 /// fine-tuning.
 fn initial_walk_check(arm: &Arm) -> anyhow::Result<WalkOutcome> {
-    let opts = crate::learner_cmd::learner_options(&arm.config, false)?;
-    let device = l3p_policy::cpu_device();
-    device.seed(opts.ppo.seed);
-    let model = l3p_learner::init_model(
-        opts.ppo.mode,
-        opts.policy.clone(),
-        opts.robots.clone(),
-        opts.daemon.init_from.as_deref(),
-        opts.ppo.transfer_heads,
-        &opts.transfer_maps,
-        &device,
-    )?;
-    let robot = arm
-        .robots
-        .first()
-        .ok_or_else(|| anyhow::anyhow!("arm {} has no robot", arm.name))?;
-    let (bytes, _) = l3p_policy::export_bytes(&model, robot)?;
+    let (_, bytes) = crate::train_cmd::start_export(&arm.config)?;
     let (rows, walks) = crate::train_cmd::walk_check_export(&arm.config, bytes)?;
     let failures: Vec<String> = rows.iter().flat_map(|r| r.walk_failures.clone()).collect();
     let gait_only = crate::experiment::only_heading_fails(

@@ -173,6 +173,17 @@ fn walk_check_in_two_simulators(
 ) -> anyhow::Result<WalkCheck> {
     // One snapshot of the checkpoint for both simulators (training goes on meanwhile).
     let (iteration, robot, bytes) = latest_export(config, run_dir)?;
+    check_in_two_simulators(config, iteration, robot, bytes)
+}
+
+/// The walk check of `bytes` (a deployable export), then, when it passes, the same check in
+/// MuJoCo.
+fn check_in_two_simulators(
+    config: &Config,
+    iteration: u64,
+    robot: &'static l3p_robots::catalog::RobotSpec,
+    bytes: Vec<u8>,
+) -> anyhow::Result<WalkCheck> {
     let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
     let env = walk_env(config, robot)?;
     let damping = env.randomization(robot.name).joint_damping[1];
@@ -190,6 +201,60 @@ fn walk_check_in_two_simulators(
         .ok_or_else(|| anyhow::anyhow!("sim2sim ran no variant"))?;
     check.sim2sim = Some((run.failures(), run.json));
     Ok(check)
+}
+
+/// Whether a run starts from a pretrained policy (a transfer mode with `init_from`): its first
+/// walk check plays that policy before any training ([`start_walk_check`]).
+fn starts_from_pretrained(config: &Config) -> bool {
+    use l3p_learner::ppo::Mode;
+    config.learner.init_from.is_some() && !matches!(config.ppo.mode, Mode::Mlp | Mode::L3p)
+}
+
+/// The export of the policy a run starts from, for its first actor's robot: the pretrained
+/// source with the run's transfer heads, built as the learner builds it (the same seed), before
+/// any training; as the actors play it ([`deployable`] gives the one walk checks judge).
+pub fn start_export(
+    config: &Config,
+) -> anyhow::Result<(&'static l3p_robots::catalog::RobotSpec, Vec<u8>)> {
+    anyhow::ensure!(
+        starts_from_pretrained(config),
+        "run {} does not start from a pretrained policy",
+        config.run.name
+    );
+    let opts = crate::learner_cmd::learner_options(config, false)?;
+    let device = l3p_policy::cpu_device();
+    device.seed(opts.ppo.seed);
+    let model = l3p_learner::init_model(
+        opts.ppo.mode,
+        opts.policy.clone(),
+        opts.robots.clone(),
+        opts.daemon.init_from.as_deref(),
+        opts.ppo.transfer_heads,
+        &opts.transfer_maps,
+        &device,
+    )?;
+    let robot = first_robot(config)?;
+    let (bytes, _) = l3p_policy::export_bytes(&model, robot.name)?;
+    Ok((robot, bytes))
+}
+
+/// The walk check at iteration 0 of a run that starts from a pretrained policy: a start that
+/// already walks (a morphology-mapped transfer can) needs no samples, and fine-tuning it could
+/// break it (BENCHMARKS.md "Session 31").
+fn start_walk_check(config: &Config, _run_dir: &std::path::Path) -> anyhow::Result<WalkCheck> {
+    let (robot, bytes) = start_export(config)?;
+    let bytes = deployable(config, robot, bytes)?;
+    let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
+    check_policy(0, bytes, robot, &policy, walk_env(config, robot)?)
+}
+
+/// [`start_walk_check`] in both simulators (`--sim2sim`).
+fn start_walk_check_in_two_simulators(
+    config: &Config,
+    _run_dir: &std::path::Path,
+) -> anyhow::Result<WalkCheck> {
+    let (robot, bytes) = start_export(config)?;
+    check_in_two_simulators(config, 0, robot, deployable(config, robot, bytes)?)
 }
 
 /// Evaluates `<run_dir>/checkpoints/latest.ckpt` on the first actor's robot against the walk
@@ -534,6 +599,18 @@ pub fn run(args: TrainArgs) -> anyhow::Result<()> {
         let (mut last_walk_eval, mut last_screen, mut latest_iteration) = (0u64, 0u64, 0u64);
         let mut walked: Option<(WalkCheck, f64)> = None;
         let mut rollout_task: Option<tokio::task::JoinHandle<anyhow::Result<()>>> = None;
+        // A run from a pretrained policy checks where it starts before training changes it.
+        if args.flags.until_walks
+            && starts_from_pretrained(&config)
+            && !daemon::checkpoint_path(&run_dir).exists()
+        {
+            let check = if args.flags.sim2sim {
+                start_walk_check_in_two_simulators
+            } else {
+                start_walk_check
+            };
+            walk_task = Some(spawn_walk(&config, &run_dir, check));
+        }
         let mut last_rollout = 0u64;
         loop {
             if let Some(t) = take_finished(&mut rollout_task) {

@@ -372,3 +372,72 @@ envs = 4
         assert_eq!(s["promising"], false, "{s}");
     }
 }
+
+/// A transfer run with `--until-walks` checks the policy it starts from before training changes it
+/// (iteration 0: a morphology-mapped start can already walk, and fine-tuning could break it); a
+/// run from scratch has no such check (`until_walks_records_every_walk_check`).
+#[test]
+fn a_transfer_run_until_it_walks_first_checks_the_policy_it_starts_from() {
+    let dir = tempfile::tempdir().unwrap();
+    let config = dir.path().join("base.toml");
+    std::fs::write(
+        &config,
+        format!("[run]\nname = \"pre\"\n{TINY_FLAT_TASK}")
+            + "[learner]\nmax_iterations = 2\n[rollout]\nsteps_per_env = 8\n[[actors]]\nrobot = \"a1\"\nenvs = 4\nthreads = 1\n",
+    )
+    .unwrap();
+    let data = dir.path().join("data");
+    let data_arg = data.to_str().unwrap();
+    let out = l3p(&[
+        "train",
+        config.to_str().unwrap(),
+        "--data-dir",
+        data_arg,
+        "--quiet",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let core = data.join("pre/checkpoints/latest.ckpt");
+    let out = l3p(&[
+        "transfer",
+        "--robot",
+        "go1",
+        "--from",
+        core.to_str().unwrap(),
+        "--config",
+        config.to_str().unwrap(),
+        "--data-dir",
+        data_arg,
+        "--iterations",
+        "2",
+        "--quiet",
+        "--until-walks",
+        "--eval-every",
+        "2",
+        "--screen-every",
+        "0",
+    ]);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // A two-iteration core does not walk on Go1: the run trains to its end and says so.
+    assert!(stdout.contains("did not hold"), "{stdout}");
+    let checks = std::fs::read_to_string(data.join("go1-transfer/walk_checks.jsonl")).unwrap();
+    let checks: Vec<serde_json::Value> = checks
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
+    assert_eq!(checks[0]["iteration"], 0, "{:?}", checks[0]);
+    let rows = checks[0]["rows"].as_array().unwrap();
+    assert_eq!(rows[0]["forward"], 1.0, "{rows:?}");
+    assert!(
+        !rows[0]["walk_failures"].as_array().unwrap().is_empty(),
+        "{rows:?}"
+    );
+}
