@@ -299,6 +299,7 @@ def load_model(path, io, args):
     MJCF: the model's own bodies, contacts and passive joint terms; a free joint and a floor are
     added only if missing; actuators and keyframes are removed (the PD torques go into
     qfrc_applied, so a model's position actuators cannot fight them).
+    URDF feet get soft rubber contact (`soften_feet`) unless --foot-contact rigid.
     Both: timestep = --physics-dt; passive terms per --no-passive / --joint-damping /
     --joint-friction / --armature."""
     path = Path(path)
@@ -337,6 +338,8 @@ def load_model(path, io, args):
         raise BadInput(f"{path}: MuJoCo cannot compile the model: {e}") from e
     model.opt.timestep = args.physics_dt
     robot = Robot(model, io)
+    if urdf and args.foot_contact == "soft":
+        soften_feet(robot)
     dofs = robot.dadr
     if args.no_passive:
         model.dof_damping[dofs] = 0.0
@@ -349,6 +352,25 @@ def load_model(path, io, args):
         if value is not None:
             field[dofs] = value
     return robot
+
+
+# A rubber foot as MuJoCo Menagerie's Unitree and ANYbotics models write it: soft (impedance
+# rising over 31 mm from 0.015), torsional and rolling friction (condim 6), and the foot's friction
+# wins over the floor's (priority). A URDF carries no contact parameters; MuJoCo's defaults are
+# those of rigid objects, on which the same policies' feet bounce at touchdown (2-6 counted
+# touchdowns per foot per second instead of 2: BENCHMARKS.md "Session 31").
+SOFT_FOOT_SOLIMP = [0.015, 1.0, 0.031, 0.5, 2.0]
+SOFT_FOOT_FRICTION = [0.8, 0.02, 0.01]
+
+
+def soften_feet(robot):
+    """Gives every foot geom of `robot` the soft rubber contact above."""
+    m = robot.m
+    feet = [g for leg in robot.legs for g in leg["feet"]]
+    m.geom_solimp[feet] = SOFT_FOOT_SOLIMP
+    m.geom_condim[feet] = 6
+    m.geom_friction[feet] = SOFT_FOOT_FRICTION
+    m.geom_priority[feet] = 1
 
 
 # -------------------------------------------------------------------------------------- contract
@@ -749,6 +771,9 @@ def parse_args(argv):
                    "(explicit kd is unstable at 5 ms on light shins without rotor armature)")
     g.add_argument("--motor-strength", type=float, default=1.0, help="scale of the clipped PD torque")
     g.add_argument("--latency-ms", type=float, default=0.0, help="delay of the joint targets")
+    g.add_argument("--foot-contact", choices=["soft", "rigid"], default="soft",
+                   help="a URDF's feet: soft rubber as MuJoCo Menagerie's models have them (default), "
+                   "or MuJoCo's rigid defaults (an MJCF keeps its own)")
     g.add_argument("--ground-friction", type=float, default=1.0,
                    help="friction of the floor this script adds (a model's own floor is kept)")
     g.add_argument("--no-passive", action="store_true",
@@ -810,6 +835,8 @@ def main(argv=None):
         "feet": {leg["name"]: [robot.m.geom(g).name or f"{robot.m.body(robot.m.geom_bodyid[g]).name} "
                                f"geom {g}" for g in leg["feet"]] for leg in robot.legs},
         "passive": passive,
+        "foot_contact": (args.foot_contact if Path(args.model).suffix.lower() == ".urdf"
+                         else "the model's"),
         "contract": {"ok": not problems, "errors": problems},
     }
     if robot.extra_joints:

@@ -116,6 +116,21 @@ class Sim2Sim(unittest.TestCase):
         self.assertLess(walk["non_foot_contact_share"], 0.02)
         self.assertLess(walk["chatter_rad"], 0.08)
 
+    def test_urdf_feet_get_soft_rubber_contact_unless_rigid_is_asked(self):
+        args = sim2sim.parse_args([str(EXPORT), "--model", str(A1_URDF)])
+        config, _ = sim2sim.load_export(EXPORT)
+        robot = sim2sim.load_model(A1_URDF, config["io"], args)
+        feet = [g for leg in robot.legs for g in leg["feet"]]
+        self.assertEqual(len(feet), 4)
+        np.testing.assert_allclose(robot.m.geom_solimp[feet], [sim2sim.SOFT_FOOT_SOLIMP] * 4)
+        self.assertTrue((robot.m.geom_condim[feet] == 6).all())
+        shins = [g for leg in robot.legs for g in leg["geoms"] if g not in leg["feet"]]
+        self.assertTrue((robot.m.geom_condim[shins] == 3).all())  # only the feet are rubber
+        rigid = sim2sim.parse_args([str(EXPORT), "--model", str(A1_URDF), "--foot-contact", "rigid"])
+        robot = sim2sim.load_model(A1_URDF, config["io"], rigid)
+        self.assertTrue((robot.m.geom_condim[feet] == 3).all())
+        self.assertFalse(np.allclose(robot.m.geom_solimp[feet], [sim2sim.SOFT_FOOT_SOLIMP] * 4))
+
     def test_flipped_joint_is_caught_by_the_contract_check(self):
         thigh = flipped_urdf(self.tmp / "thigh.urdf", "FL_thigh_joint", limits=True)
         code, r, err = run(EXPORT, "--model", thigh)
