@@ -185,6 +185,18 @@ fn add(args: &AddArgs) -> anyhow::Result<()> {
     for n in &inferred.notes {
         println!("note: {n}");
     }
+    // Registered robots are loaded from the copied URDF's text, without its meshes.
+    let hulls = model
+        .bodies
+        .iter()
+        .flat_map(|b| &b.colliders)
+        .filter(|c| matches!(c.shape, l3p_robots::model::ShapeSpec::ConvexHull { .. }))
+        .count();
+    if hulls > 0 {
+        println!(
+            "note: {hulls} collision meshes were convex hulls in this check; training reads {urdf_file} without its meshes, where they get stand-ins"
+        );
+    }
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let urdf_path = dir.join(&urdf_file);
     std::fs::copy(&args.urdf, &urdf_path)
