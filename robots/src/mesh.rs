@@ -7,7 +7,8 @@
 //!   absolute path; `package://pkg/rest` is the first file found of `<urdf dir>/rest`,
 //!   `<urdf dir>/../rest`, then `<d>/pkg/rest` for `d` the URDF's directory and each of its
 //!   ancestors (a package's `urdf/` and `meshes/` side by side, or a ROS workspace's `src/pkg`).
-//! - Points ([`hull_points`]): the mesh's distinct vertices times its `scale`. More than
+//! - Points ([`hull_points`]): the mesh's distinct vertices times its `scale`, on a
+//!   [`HULL_RESOLUTION_M`] grid (what an added robot's description records: [`MeshHull`]). More than
 //!   [`MAX_HULL_POINTS`] are reduced to the most extreme vertex along each of that many fixed
 //!   directions (the six axis directions among them, so the bounding box stays exact): contact
 //!   cost in the simulator grows with the hull's size, and a vendor's 50,000-triangle shank needs
@@ -18,6 +19,8 @@
 
 use std::collections::HashSet;
 use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
 
 use crate::math::Vec3;
 
@@ -32,6 +35,24 @@ pub const MIN_HULL_THICKNESS: f32 = 0.01;
 pub const MIN_HULL_SPAN_M: f32 = 1e-4;
 /// Largest span of a hull (m): no robot link is longer.
 pub const MAX_HULL_SPAN_M: f32 = 10.0;
+/// Hull points are rounded to this grid (m), so that a robot description lists them readably and
+/// the hull read back from it is the one read from the mesh.
+pub const HULL_RESOLUTION_M: f32 = 1e-4;
+
+/// The hull of one collision mesh as a URDF names it: what `l3p robots add` records in an added
+/// robot's description ([`crate::added::RobotDescription::mesh_hulls`]), so that the robot keeps
+/// its hulls where only the URDF's text travels ([`crate::urdf::load_urdf_str_with_hulls`]).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshHull {
+    /// The `<mesh filename>`, exactly as the URDF writes it.
+    pub file: String,
+    /// The `<mesh scale>` (`[1, 1, 1]` when the URDF gives none).
+    pub scale: [f32; 3],
+    /// The hull's points ([`hull_points`]: scale applied, metres, in the mesh's frame), at most
+    /// [`MAX_HULL_POINTS`].
+    pub points: Vec<[f32; 3]>,
+}
 
 /// The file a URDF `<mesh filename>` names, for a URDF in `urdf_dir`; or why none is found.
 pub fn resolve(filename: &str, urdf_dir: &Path) -> Result<PathBuf, String> {
@@ -202,6 +223,10 @@ pub fn hull_points(vertices: &[Vec3], scale: Vec3) -> Result<Vec<Vec3>, String> 
         if !p.is_finite() {
             return Err(format!("vertex ({}, {}, {}) is not finite", v.x, v.y, v.z));
         }
+        // Divided, not multiplied by the resolution: `k / 1e4` is the f32 nearest to k·0.1 mm,
+        // so that rounding a rounded point changes nothing. Adding zero turns -0 into 0.
+        let per_m = HULL_RESOLUTION_M.recip();
+        let p = (p * per_m).round() / per_m + Vec3::ZERO;
         if seen.insert(p.to_array().map(f32::to_bits)) {
             points.push(p);
         }
@@ -319,6 +344,20 @@ mod tests {
         let hi = points.iter().fold(Vec3::NEG_INFINITY, |a, p| a.max(*p));
         assert_eq!(lo, Vec3::ZERO);
         assert!((hi - Vec3::new(0.1, 0.2, 0.3)).length() < 1e-6, "{hi}");
+    }
+
+    #[test]
+    fn points_are_rounded_to_the_grid_and_rounding_again_changes_nothing() {
+        let jitter: Vec<Vec3> = cube(3)
+            .into_iter()
+            .map(|p| p * 0.0123456 - Vec3::splat(0.00001))
+            .collect();
+        let points = hull_points(&jitter, Vec3::ONE).unwrap();
+        // -0.00001 m rounds to 0 (not -0), 0.0123456 - 0.00001 to 0.0123.
+        assert!(points.contains(&Vec3::ZERO), "{points:?}");
+        assert!(points.iter().all(|p| p.x.is_sign_positive()), "{points:?}");
+        assert!(points.contains(&Vec3::splat(0.0123)), "{points:?}");
+        assert_eq!(hull_points(&points, Vec3::ONE).unwrap(), points);
     }
 
     #[test]

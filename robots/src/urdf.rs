@@ -14,9 +14,11 @@
 //!    A mesh collider of a URDF loaded from a file ([`load_urdf_file`]) whose STL or OBJ file is
 //!    found beside it (relative, `package://` and `file://` paths: see [`crate::mesh`]) is the
 //!    convex hull of its scaled vertices ([`ShapeSpec::ConvexHull`], at most
-//!    [`crate::mesh::MAX_HULL_POINTS`] points), named in `warnings`. Any other mesh collider — a
-//!    URDF loaded from text ([`load_urdf_str`]: no directory to look in), a missing file, Collada,
-//!    an unreadable, empty, flat or non-finite mesh (a warning names the file and why) — gets
+//!    [`crate::mesh::MAX_HULL_POINTS`] points), named in `warnings`; text loaded with the hulls
+//!    such a load returned ([`load_urdf_file_with_hulls`] → [`load_urdf_str_with_hulls`]: an added
+//!    robot, whose description records them) gets the same hulls. Any other mesh collider — a
+//!    URDF loaded from text alone ([`load_urdf_str`]: no directory to look in), a missing file,
+//!    Collada, an unreadable, empty, flat or non-finite mesh (a warning names the file and why) — gets
 //!    primitive stand-ins, [`MeshStandIn`]: on a leg link, capsules along the link's
 //!    joint-to-child segments with a radius from its inertia, stopping short of a foot's shapes,
 //!    so that no stand-in hangs below the feet; on the trunk and on leaf links (nothing to run a
@@ -29,6 +31,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 use crate::math::{Mat3, Pose, Rot3, Vec3};
+use crate::mesh::MeshHull;
 use xml::common::Position;
 use xml::reader::{EventReader, ParserConfig, XmlEvent};
 use xml::writer::EmitterConfig;
@@ -93,6 +96,14 @@ pub enum UrdfError {
 
 /// Loads a URDF file from disk; collision meshes found beside it are convex hulls (module doc).
 pub fn load_urdf_file(path: impl AsRef<Path>) -> Result<RobotModel, UrdfError> {
+    load_urdf_file_with_hulls(path).map(|(model, _)| model)
+}
+
+/// [`load_urdf_file`], with the hull of every mesh used as one (each file and scale once, in the
+/// file's order): what [`load_urdf_str_with_hulls`] needs to build the same model from the text.
+pub fn load_urdf_file_with_hulls(
+    path: impl AsRef<Path>,
+) -> Result<(RobotModel, Vec<MeshHull>), UrdfError> {
     let path = path.as_ref();
     let file = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|source| UrdfError::Io {
@@ -103,7 +114,7 @@ pub fn load_urdf_file(path: impl AsRef<Path>) -> Result<RobotModel, UrdfError> {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
-    load(&text, &file, MeshStandIn::default(), Some(dir))
+    load(&text, &file, MeshStandIn::default(), MeshSource::Dir(dir))
 }
 
 /// Loads a URDF document from text; `file` names it in errors. No mesh is read (there is no
@@ -118,23 +129,45 @@ pub fn load_urdf_str_with(
     file: &str,
     stand_in: MeshStandIn,
 ) -> Result<RobotModel, UrdfError> {
-    load(text, file, stand_in, None)
+    load(text, file, stand_in, MeshSource::None).map(|(model, _)| model)
 }
 
-/// Loads a URDF document; its meshes are looked for relative to `mesh_dir` (the URDF's
-/// directory), none when `None`.
+/// Loads a URDF document from text whose mesh colliders are the given `hulls` (matched by the
+/// `<mesh>`'s filename and scale, as [`load_urdf_file_with_hulls`] returned them): an added
+/// robot's model where only its URDF text and description travel. A mesh without a hull, or
+/// whose points make no hull (checked as a mesh file's are), gets stand-ins.
+pub fn load_urdf_str_with_hulls(
+    text: &str,
+    file: &str,
+    hulls: &[MeshHull],
+) -> Result<RobotModel, UrdfError> {
+    load(text, file, MeshStandIn::default(), MeshSource::Hulls(hulls)).map(|(model, _)| model)
+}
+
+/// Where the points of mesh colliders come from.
+#[derive(Debug, Clone, Copy)]
+enum MeshSource<'a> {
+    /// Nowhere: every mesh gets stand-ins.
+    None,
+    /// Mesh files looked for relative to this directory (the URDF's).
+    Dir(&'a Path),
+    /// Hulls given by filename and scale (an added robot's description).
+    Hulls(&'a [MeshHull]),
+}
+
+/// Loads a URDF document whose meshes come from `meshes`; also returns the hulls used.
 fn load(
     text: &str,
     file: &str,
     stand_in: MeshStandIn,
-    mesh_dir: Option<&Path>,
-) -> Result<RobotModel, UrdfError> {
+    meshes: MeshSource,
+) -> Result<(RobotModel, Vec<MeshHull>), UrdfError> {
     let cleaned = prepass(text, file)?;
     let robot = urdf_rs::read_from_string(&cleaned).map_err(|e| UrdfError::Parse {
         file: file.to_string(),
         message: e.to_string(),
     })?;
-    build(&robot, file, stand_in, mesh_dir)
+    build(&robot, file, stand_in, meshes)
 }
 
 /// What replaces a mesh collider that is not used as a convex hull (a URDF loaded from text, or
@@ -560,12 +593,13 @@ struct Builder<'a> {
     meshes: HashMap<(usize, usize), Result<Vec<Vec3>, String>>,
 }
 
-/// Reads every collision mesh of `robot` that can be found from `dir` (each file and scale once).
+/// The hull points of every collision mesh of `robot` by (link, collision) index, or why it has
+/// none (each file and scale read or checked once); no entry for a mesh without a source.
 fn read_meshes(
     robot: &urdf_rs::Robot,
-    dir: &Path,
+    source: MeshSource,
 ) -> HashMap<(usize, usize), Result<Vec<Vec3>, String>> {
-    let mut by_file: HashMap<(&str, [u32; 3]), Result<Vec<Vec3>, String>> = HashMap::new();
+    let mut by_file: HashMap<(&str, [u32; 3]), Option<Result<Vec<Vec3>, String>>> = HashMap::new();
     let mut out = HashMap::new();
     for (li, link) in robot.links.iter().enumerate() {
         for (ci, col) in link.collision.iter().enumerate() {
@@ -573,8 +607,48 @@ fn read_meshes(
                 let scale = scale.as_ref().map_or(Vec3::ONE, v3);
                 let read = by_file
                     .entry((filename.as_str(), scale.to_array().map(f32::to_bits)))
-                    .or_insert_with(|| crate::mesh::load_hull(filename, scale, dir));
-                out.insert((li, ci), read.clone());
+                    .or_insert_with(|| match source {
+                        MeshSource::None => None,
+                        MeshSource::Dir(dir) => Some(crate::mesh::load_hull(filename, scale, dir)),
+                        MeshSource::Hulls(hulls) => hulls
+                            .iter()
+                            .find(|h| h.file == *filename && h.scale == scale.to_array())
+                            .map(|h| {
+                                let points: Vec<Vec3> =
+                                    h.points.iter().map(|p| Vec3::from_array(*p)).collect();
+                                crate::mesh::hull_points(&points, Vec3::ONE).map_err(|why| {
+                                    format!("its hull in the robot description: {why}")
+                                })
+                            }),
+                    });
+                if let Some(read) = read {
+                    out.insert((li, ci), read.clone());
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The hulls of `meshes` by filename and scale, each once, in the file's order.
+fn used_hulls(
+    robot: &urdf_rs::Robot,
+    meshes: &HashMap<(usize, usize), Result<Vec<Vec3>, String>>,
+) -> Vec<MeshHull> {
+    let mut out: Vec<MeshHull> = Vec::new();
+    for (li, link) in robot.links.iter().enumerate() {
+        for (ci, col) in link.collision.iter().enumerate() {
+            if let urdf_rs::Geometry::Mesh { filename, scale } = &col.geometry
+                && let Some(Ok(points)) = meshes.get(&(li, ci))
+            {
+                let scale = scale.as_ref().map_or(Vec3::ONE, v3).to_array();
+                if !out.iter().any(|h| h.file == *filename && h.scale == scale) {
+                    out.push(MeshHull {
+                        file: filename.clone(),
+                        scale,
+                        points: points.iter().map(|p| p.to_array()).collect(),
+                    });
+                }
             }
         }
     }
@@ -585,8 +659,8 @@ fn build(
     robot: &urdf_rs::Robot,
     file: &str,
     stand_in: MeshStandIn,
-    mesh_dir: Option<&Path>,
-) -> Result<RobotModel, UrdfError> {
+    source: MeshSource,
+) -> Result<(RobotModel, Vec<MeshHull>), UrdfError> {
     let structure = |message: String| UrdfError::Structure {
         file: file.to_string(),
         message,
@@ -645,17 +719,19 @@ fn build(
         acc: Vec::new(),
         warnings: Vec::new(),
         stand_in,
-        meshes: mesh_dir.map(|d| read_meshes(robot, d)).unwrap_or_default(),
+        meshes: read_meshes(robot, source),
     };
     b.new_body(&robot.links[root].name, None, None);
     b.visit(root, 0, Pose::IDENTITY, 0)?;
     b.finish();
-    Ok(RobotModel {
+    let hulls = used_hulls(robot, &b.meshes);
+    let model = RobotModel {
         name: robot.name.clone(),
         source: file.to_string(),
         bodies: b.bodies,
         warnings: b.warnings,
-    })
+    };
+    Ok((model, hulls))
 }
 
 impl<'a> Builder<'a> {

@@ -1,16 +1,21 @@
 //! Collision meshes beside a URDF (issue 44): STL (binary and ASCII) and OBJ files found from
 //! the URDF's directory are convex hulls of their scaled vertices; a missing, unreadable or flat
 //! mesh falls back to the primitive stand-ins with a warning naming the file; a robot standing
-//! on calf meshes carries its weight on its feet. Every file is generated here.
+//! on calf meshes carries its weight on its feet; a robot added from such a URDF keeps its hulls in
+//! its description, so the robot registered from the description and the URDF's text alone (as
+//! training and remote actors get it) has the colliders its standing check had. Every file is
+//! generated here.
 
 use std::path::Path;
 
 use l3p_robots::actuator::Actuator;
+use l3p_robots::added::{self, Overrides, RobotDescription};
 use l3p_robots::bench::{MIN_FOOT_SHARE, stand_check};
 use l3p_robots::catalog::RobotSpec;
+use l3p_robots::mesh::MAX_HULL_POINTS;
 use l3p_robots::model::{RobotModel, ShapeSpec};
 use l3p_robots::sim::RobotBinding;
-use l3p_robots::urdf::{load_urdf_file, load_urdf_str};
+use l3p_robots::urdf::{load_urdf_file, load_urdf_file_with_hulls, load_urdf_str};
 
 type Vec3 = [f32; 3];
 type Triangle = [Vec3; 3];
@@ -337,25 +342,49 @@ fn missing_truncated_flat_and_collada_meshes_fall_back_to_stand_ins_naming_the_f
     assert_eq!(hull_of(&model, "good").len(), 8);
 }
 
-#[test]
-fn a1_with_calf_meshes_stands_on_its_feet_and_its_hulls() {
+/// The mesh filename of [`a1_with_calf_meshes`]' calves, as its URDF writes it.
+const CALF_MESH: &str = "package://a1_description/meshes/calf.stl";
+
+/// A1's URDF named `name` with its four calf capsules as one STL mesh in millimetres (a 16-sided
+/// prism of the capsule's radius along its straight part, closed by cones to its ends), written
+/// as a ROS package under `dir`; returns the URDF's path.
+fn a1_with_calf_meshes(dir: &Path, name: &str) -> std::path::PathBuf {
     let spec = RobotSpec::by_name("a1").unwrap();
     let capsule = r#"<geometry><capsule radius="0.012" length="0.176"/></geometry>"#;
     assert_eq!(spec.urdf.matches(capsule).count(), 4, "A1's four calves");
-    // The calf's capsule as a mesh in millimetres: a 16-sided prism of its radius along its
-    // straight part, closed by cones to its ends.
-    let text = spec.urdf.replace(
-        capsule,
-        r#"<geometry><mesh filename="package://a1_description/meshes/calf.stl" scale="0.001 0.001 0.001"/></geometry>"#,
-    );
-    let tmp = tempfile::tempdir().unwrap();
-    let pkg = tmp.path().join("a1_description");
+    let text = spec
+        .urdf
+        .replace(
+            capsule,
+            &format!(
+                r#"<geometry><mesh filename="{CALF_MESH}" scale="0.001 0.001 0.001"/></geometry>"#
+            ),
+        )
+        .replacen("name=\"a1\"", &format!("name=\"{name}\""), 1);
+    let pkg = dir.join("a1_description");
     write(
         &pkg.join("meshes/calf.stl"),
         binary_stl(&prism_triangles(12.0, 88.0, 12.0, 16)),
     );
     let path = pkg.join("urdf/a1.urdf");
     write(&path, &text);
+    path
+}
+
+/// Every collider of `model` by body, as exact text (shape, pose, link, stand-in flag).
+fn colliders(model: &RobotModel) -> Vec<String> {
+    model
+        .bodies
+        .iter()
+        .map(|b| format!("{}: {:?}", b.name, b.colliders))
+        .collect()
+}
+
+#[test]
+fn a1_with_calf_meshes_stands_on_its_feet_and_its_hulls() {
+    let spec = RobotSpec::by_name("a1").unwrap();
+    let tmp = tempfile::tempdir().unwrap();
+    let path = a1_with_calf_meshes(tmp.path(), "a1");
     let model = load_urdf_file(&path).unwrap();
     for leg in ["FL", "FR", "RL", "RR"] {
         let calf = format!("{leg}_calf");
@@ -387,4 +416,109 @@ fn a1_with_calf_meshes_stands_on_its_feet_and_its_hulls() {
         r.settled_height,
         r.kinematic_height
     );
+}
+
+#[test]
+fn an_added_robot_keeps_its_mesh_hulls_where_only_its_description_and_urdf_text_travel() {
+    let meshes = tempfile::tempdir().unwrap();
+    let path = a1_with_calf_meshes(meshes.path(), "Hull Dog");
+    // What `l3p robots add` does: load the file with its hulls, describe, record the hulls.
+    let (model, hulls) = load_urdf_file_with_hulls(&path).unwrap();
+    assert_eq!(
+        hulls.len(),
+        1,
+        "one file and scale for the four calves: {hulls:?}"
+    );
+    assert_eq!(hulls[0].file, CALF_MESH);
+    assert_eq!(hulls[0].scale, [0.001; 3]);
+    assert_eq!(hulls[0].points.len(), 34);
+    assert!(hulls[0].points.len() <= MAX_HULL_POINTS);
+    let named = Overrides {
+        name: Some("hull_dog".into()),
+        ..Default::default()
+    };
+    let mut inferred = added::describe(&model, "hull_dog.urdf", &named, false).unwrap();
+    inferred.description.mesh_hulls = hulls;
+    let d = &inferred.description;
+
+    // The description round-trips through its TOML, the hulls readable in it: points in metres
+    // on the 0.1 mm grid (the prism's 12 mm radius, its apexes 100 mm out).
+    let toml_text = d.to_toml();
+    assert!(toml_text.contains("[[mesh_hulls]]"), "{toml_text}");
+    assert!(
+        toml_text.contains(&format!("file = \"{CALF_MESH}\"")),
+        "{toml_text}"
+    );
+    assert!(toml_text.contains("[0.0, 0.0, 0.1]"), "{toml_text}");
+    assert!(toml_text.contains("0.012"), "{toml_text}");
+    let back: RobotDescription = toml::from_str(&toml_text).unwrap();
+    assert_eq!(&back, d);
+
+    // Registered from the description and the URDF's text, the mesh files gone: the same
+    // colliders as the file-loaded model the standing check used, hulls on the calves.
+    let robots = tempfile::tempdir().unwrap();
+    let text = std::fs::read_to_string(&path).unwrap();
+    write(&robots.path().join("hull_dog.urdf"), &text);
+    write(&robots.path().join("hull_dog.toml"), &toml_text);
+    drop(meshes);
+    assert!(!path.exists());
+    let specs = added::load_dir(robots.path()).unwrap();
+    assert_eq!(specs.len(), 1);
+    let spec = RobotSpec::by_name("hull_dog").unwrap();
+    assert_eq!(spec.mesh_hulls, d.mesh_hulls.as_slice());
+    let registered = spec.model().unwrap();
+    assert_eq!(colliders(&registered), colliders(&model));
+    for leg in ["FL", "FR", "RL", "RR"] {
+        let calf = format!("{leg}_calf");
+        assert_eq!(hull_of(&registered, &calf).len(), 34, "{calf}");
+        assert!(warned(
+            &registered,
+            &[&format!("link `{calf}`: mesh `{CALF_MESH}`"), "convex hull"]
+        ));
+    }
+    // The text alone, as before the description kept hulls, would give stand-ins.
+    let text_only = load_urdf_str(&text, "hull_dog.urdf").unwrap();
+    assert_ne!(colliders(&text_only), colliders(&model));
+
+    // A description written before `mesh_hulls` existed still loads: stand-ins, as before.
+    let old = RobotDescription {
+        name: "hull_dog_old".into(),
+        mesh_hulls: Vec::new(),
+        ..d.clone()
+    };
+    let old_text = old.to_toml();
+    assert!(!old_text.contains("mesh_hulls"), "{old_text}");
+    let old_back: RobotDescription = toml::from_str(&old_text).unwrap();
+    let old_spec = added::register(&old_back, text.clone()).unwrap();
+    assert!(old_spec.mesh_hulls.is_empty());
+    assert_eq!(colliders(&old_spec.model().unwrap()), colliders(&text_only));
+
+    // Hand-edited hulls that make no hull fall back to stand-ins with a warning naming the mesh;
+    // more points than a hull keeps are refused, naming the key.
+    let mut flat = d.clone();
+    flat.name = "hull_dog_flat".into();
+    for p in &mut flat.mesh_hulls[0].points {
+        p[2] = 0.0;
+    }
+    let flat_model = added::register(&flat, text.clone())
+        .unwrap()
+        .model()
+        .unwrap();
+    assert_eq!(colliders(&flat_model), colliders(&text_only));
+    assert!(
+        warned(
+            &flat_model,
+            &[
+                &format!("mesh `{CALF_MESH}` not used: its hull in the robot description"),
+                "flat"
+            ]
+        ),
+        "{:#?}",
+        flat_model.warnings
+    );
+    let mut many = d.clone();
+    many.name = "hull_dog_many".into();
+    many.mesh_hulls[0].points = vec![[0.0; 3]; MAX_HULL_POINTS + 1];
+    let err = added::register(&many, text).unwrap_err().to_string();
+    assert!(err.contains("mesh_hulls[0].points"), "{err}");
 }
