@@ -359,6 +359,23 @@ fn log_robot_static(rec: &RecordingStream, p: &Player) -> anyhow::Result<()> {
                         .with_colors([color])
                         .with_fill_mode(rerun::FillMode::Solid),
                 ),
+                ShapeSpec::ConvexHull { ref points } => {
+                    // The loader only keeps points with volume; should they make no hull, the
+                    // points themselves are drawn.
+                    match l3p_robots::sim::convex_hull_mesh(points) {
+                        Some((vertices, triangles)) => rec.log_static(
+                            path.as_str(),
+                            &Mesh3D::new(vertices.iter().map(|v| [v.x, v.y, v.z]))
+                                .with_triangle_indices(triangles)
+                                .with_vertex_colors(std::iter::repeat_n(color, vertices.len())),
+                        ),
+                        None => rec.log_static(
+                            path.as_str(),
+                            &rerun::Points3D::new(points.iter().map(|v| [v.x, v.y, v.z]))
+                                .with_colors([color]),
+                        ),
+                    }
+                }
             }
             .map_err(rec_err)?;
         }

@@ -119,7 +119,9 @@ pub fn load_added_robots(data_dir: Option<&Path>) {
 
 fn add(args: &AddArgs) -> anyhow::Result<()> {
     use l3p_robots::added::{Overrides, describe};
-    let model = l3p_robots::urdf::load_urdf_file(&args.urdf)?;
+    // The hulls of the meshes found beside the file go into the description: the robot it
+    // registers, here and on other machines, has the colliders the standing check uses.
+    let (model, mesh_hulls) = l3p_robots::urdf::load_urdf_file_with_hulls(&args.urdf)?;
     let overrides = Overrides {
         name: args.name.clone(),
         kp: args.kp,
@@ -141,7 +143,8 @@ fn add(args: &AddArgs) -> anyhow::Result<()> {
         );
     }
     let urdf_file = format!("{name}.urdf");
-    let inferred = describe(&model, &urdf_file, &overrides, args.force)?;
+    let mut inferred = describe(&model, &urdf_file, &overrides, args.force)?;
+    inferred.description.mesh_hulls = mesh_hulls;
     let d = &inferred.description;
     print!("{}", inferred.legs.summary());
     println!("default pose (rad, canonical order; abduction, hip, knee per leg):");
@@ -184,6 +187,16 @@ fn add(args: &AddArgs) -> anyhow::Result<()> {
     );
     for n in &inferred.notes {
         println!("note: {n}");
+    }
+    if !d.mesh_hulls.is_empty() {
+        println!(
+            "collision meshes as convex hulls (recorded in the description as mesh_hulls): {}",
+            d.mesh_hulls
+                .iter()
+                .map(|h| format!("{} ({} points)", h.file, h.points.len()))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
     }
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let urdf_path = dir.join(&urdf_file);

@@ -274,6 +274,103 @@ fn an_actor_elsewhere_fetches_an_added_robot_from_the_registry() {
     );
 }
 
+/// Binary STL of the box with half extents `h`: 12 triangles (normals left zero).
+fn box_stl(h: [f32; 3]) -> Vec<u8> {
+    let corner = |i: usize| [0, 1, 2].map(|a| if (i >> a) & 1 == 0 { -h[a] } else { h[a] });
+    let faces = [
+        [0, 2, 6, 4],
+        [1, 5, 7, 3],
+        [0, 4, 5, 1],
+        [2, 3, 7, 6],
+        [0, 1, 3, 2],
+        [4, 6, 7, 5],
+    ];
+    let mut out = vec![b' '; 80];
+    out.extend(12u32.to_le_bytes());
+    for f in faces {
+        for t in [[f[0], f[1], f[2]], [f[0], f[2], f[3]]] {
+            out.extend([0u8; 12]);
+            for c in t.map(corner).as_flattened() {
+                out.extend(c.to_le_bytes());
+            }
+            out.extend([0u8; 2]);
+        }
+    }
+    out
+}
+
+/// `l3p robots add` on a URDF whose calves are STL meshes records their hulls in the description;
+/// the robot registered from it — `robots check` in a new process, and the registry artifact an
+/// actor elsewhere installs — has the hulls with the mesh files gone.
+#[test]
+fn an_added_robots_mesh_hulls_travel_in_its_description_and_registry_artifact() {
+    let dir = tempfile::tempdir().unwrap();
+    let home = dir.path().join("home");
+    let capsule = r#"<geometry><capsule radius="0.012" length="0.176"/></geometry>"#;
+    let urdf = l3p_robots::catalog::RobotSpec::by_name("a1")
+        .unwrap()
+        .urdf
+        .replacen("name=\"a1\"", "name=\"Hull Dog\"", 1)
+        .replace(
+            capsule,
+            r#"<geometry><mesh filename="../meshes/calf.stl" scale="0.001 0.001 0.001"/></geometry>"#,
+        );
+    let package = home.join("hull_dog_description");
+    std::fs::create_dir_all(package.join("urdf")).unwrap();
+    std::fs::create_dir_all(package.join("meshes")).unwrap();
+    std::fs::write(package.join("urdf/hull_dog.urdf"), urdf).unwrap();
+    // The calf capsule's straight part as a box in millimetres.
+    std::fs::write(package.join("meshes/calf.stl"), box_stl([12.0, 12.0, 88.0])).unwrap();
+
+    let (ok, out) = l3p(
+        &["robots", "add", "hull_dog_description/urdf/hull_dog.urdf"],
+        &home,
+    );
+    assert!(ok, "{out}");
+    assert!(out.contains("../meshes/calf.stl (8 points)"), "{out}");
+    let text = std::fs::read_to_string(home.join("l3p-data/robots/hull_dog.toml")).unwrap();
+    assert!(
+        text.contains("[[mesh_hulls]]") && text.contains("file = \"../meshes/calf.stl\""),
+        "{text}"
+    );
+    std::fs::remove_dir_all(&package).unwrap();
+
+    // A new process registers it from the description and the copied URDF's text.
+    let (ok, out) = l3p(&["robots", "check", "hull_dog"], &home);
+    assert!(ok, "{out}");
+    for leg in ["FL", "FR", "RL", "RR"] {
+        assert!(
+            out.contains(&format!(
+                "link `{leg}_calf`: mesh `../meshes/calf.stl` used as a convex hull of 8 points"
+            )),
+            "{out}"
+        );
+    }
+
+    // The registry artifact, installed where neither the meshes nor the home directory are.
+    let registry = l3p_registry::Registry::open(&home.join("l3p-data")).unwrap();
+    let (_, bytes) = registry.get_blob("robot-hull_dog@latest").unwrap();
+    let far = dir.path().join("far/robots");
+    let spec = l3p_cli::robots_cmd::install_robot_artifact(&bytes, "hull_dog", &far).unwrap();
+    assert!(
+        std::fs::read_to_string(far.join("hull_dog.toml"))
+            .unwrap()
+            .contains("[[mesh_hulls]]")
+    );
+    assert_eq!(spec.mesh_hulls.len(), 1);
+    let model = spec.model().unwrap();
+    let calf_hulls = model
+        .bodies
+        .iter()
+        .flat_map(|b| &b.colliders)
+        .filter(|c| c.link.ends_with("_calf"))
+        .filter(|c| {
+            matches!(&c.shape, l3p_robots::model::ShapeSpec::ConvexHull { points } if points.len() == 8)
+        })
+        .count();
+    assert_eq!(calf_hulls, 4, "{:#?}", model.warnings);
+}
+
 /// `l3p deploy` and `l3p sim-robot` know an added robot as they know a catalog one: a policy
 /// trained for it (here 2 iterations: the test is the deploy path, not the gait) is served by the
 /// registry, loaded by the controller for that robot and sent to a simulated robot built from the

@@ -184,6 +184,7 @@ fn the_lean_binary_knows_robots_added_under_the_configs_data_dir() {
         action_scale: a1.action_scale,
         spawn_height: a1.spawn_height,
         mass: a1.published_mass,
+        mesh_hulls: Vec::new(),
     };
     std::fs::write(robots.join("lean_quad.toml"), description.to_toml()).unwrap();
     let config = dir.path().join("deploy.toml");

@@ -25,6 +25,12 @@
 //!   caller's value, with a note), action scale [`DEFAULT_ACTION_SCALE`] (IsaacLab's Unitree
 //!   value), penalised contacts on thighs and shanks, termination on trunk contact.
 //!
+//! Collision meshes: `l3p robots add` loads the URDF from its file, where STL/OBJ meshes found
+//! beside it are convex hulls ([`crate::mesh`]), and records those hulls in the description
+//! ([`RobotDescription::mesh_hulls`]); [`register`] builds the model from the URDF's text with
+//! them, so training, evaluation and actors on other machines (which get the description and the
+//! URDF's text, not the mesh files) simulate the colliders the standing check used.
+//!
 //! Joint positions stay in the file's convention: the canonical order is applied, the canonical
 //! axis signs are not (they are recorded as `axis_signs`). Every robot has its own encoder and
 //! decoder, so a transfer learns any sign convention; only zero-shot play of another robot's
@@ -43,9 +49,10 @@ use serde::{Deserialize, Serialize};
 use crate::bench::NotOnFeet;
 use crate::catalog::{Family, Gains, NUM_JOINTS, RobotSpec};
 use crate::infer::{InferError, InferredLegs};
+use crate::mesh::{MAX_HULL_POINTS, MeshHull};
 use crate::model::{JointKind, RobotModel};
 use crate::task::MAX_PENALISED_BODIES;
-use crate::urdf::{UrdfError, load_urdf_str};
+use crate::urdf::{UrdfError, load_urdf_str_with_hulls};
 
 // Inferring a description checks it standing in simulation: `describe` needs the simulator.
 // Registering and finding described robots (`register`, `load_dir`, `find`) does not, so a build
@@ -122,6 +129,12 @@ pub struct RobotDescription {
     pub spawn_height: f32,
     /// Total mass of the model (kg).
     pub mass: f32,
+    /// Convex hulls of the URDF's collision meshes, read beside it by `l3p robots add` (by the
+    /// `<mesh>`'s filename and scale, points in metres): the robot is simulated with them where
+    /// only this file and the URDF's text travel (training, remote actors). Empty when no mesh
+    /// was read; a mesh without a hull here gets the loader's stand-ins.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub mesh_hulls: Vec<MeshHull>,
 }
 
 /// What [`describe`] found besides the description: the leg structure and notes for review.
@@ -351,6 +364,15 @@ impl RobotDescription {
                 &format!("at most {MAX_PENALISED_BODIES} links"),
             ));
         }
+        for (i, h) in self.mesh_hulls.iter().enumerate() {
+            if h.points.len() > MAX_HULL_POINTS {
+                return Err(bad(
+                    &format!("mesh_hulls[{i}].points"),
+                    h.points.len(),
+                    &format!("at most {MAX_HULL_POINTS} points (mesh `{}`)", h.file),
+                ));
+            }
+        }
         Ok(())
     }
 
@@ -398,6 +420,7 @@ impl RobotDescription {
             display_name: leak(self.display_name.clone()),
             family: Family::Other,
             urdf,
+            mesh_hulls: Box::leak(self.mesh_hulls.clone().into_boxed_slice()),
             joint_names: std::array::from_fn(|k| leak(self.joint_names[k].clone())),
             default_pose: self.default_pose,
             base_link: leak(self.base_link.clone()),
@@ -436,13 +459,41 @@ impl RobotDescription {
                 _ => {}
             }
         }
-        let body = match toml::Value::try_from(self) {
+        let mut body = match toml::Value::try_from(self) {
             Ok(mut value) => {
                 shortest(&mut value);
+                // Written below, one point a line (toml writes an array on one line).
+                if let toml::Value::Table(t) = &mut value {
+                    t.remove("mesh_hulls");
+                }
                 toml::to_string(&value).unwrap_or_default()
             }
             Err(_) => String::new(),
         };
+        if !self.mesh_hulls.is_empty() {
+            body.push_str(
+                "\n# Convex hulls of the URDF's collision meshes, read beside it when the robot was added:\n\
+                 # the `<mesh>` filename as the URDF writes it, its scale, the points (m, scale applied).\n",
+            );
+        }
+        let float = |x: f32| {
+            let mut v = toml::Value::Float(x.into());
+            shortest(&mut v);
+            v.to_string()
+        };
+        let triple = |p: [f32; 3]| format!("[{}, {}, {}]", float(p[0]), float(p[1]), float(p[2]));
+        for h in &self.mesh_hulls {
+            let points: String = h
+                .points
+                .iter()
+                .map(|p| format!("    {},\n", triple(*p)))
+                .collect();
+            body.push_str(&format!(
+                "\n[[mesh_hulls]]\nfile = {}\nscale = {}\npoints = [\n{points}]\n",
+                toml::Value::String(h.file.clone()),
+                triple(h.scale),
+            ));
+        }
         format!(
             "# An l3p robot description (`l3p robots add`); edit any value and run `l3p robots check {}`.\n\
              # Inferred: joint order, feet and trunk from geometry; default_pose (foot under hip at {:.0}% of\n\
@@ -478,7 +529,8 @@ impl RobotDescription {
 /// Registered robots with the description each came from.
 static ADDED: RwLock<Vec<(RobotDescription, &'static RobotSpec)>> = RwLock::new(Vec::new());
 
-/// Registers a description (with its URDF text) so that [`RobotSpec::by_name`] finds it. The same
+/// Registers a description (with its URDF text) so that [`RobotSpec::by_name`] finds it; its
+/// model has the description's mesh hulls ([`RobotDescription::mesh_hulls`]). The same
 /// description and URDF registered again returns the earlier spec; a different one under the same
 /// name replaces it for later lookups.
 pub fn register(desc: &RobotDescription, urdf: String) -> Result<&'static RobotSpec, AddError> {
@@ -491,7 +543,7 @@ pub fn register(desc: &RobotDescription, urdf: String) -> Result<&'static RobotS
             return Ok(found);
         }
     }
-    let model = load_urdf_str(&urdf, &format!("robot:{}", desc.name))?;
+    let model = load_urdf_str_with_hulls(&urdf, &format!("robot:{}", desc.name), &desc.mesh_hulls)?;
     let spec: &'static RobotSpec = Box::leak(Box::new(desc.spec_with_model(&model, leak(urdf))?));
     let mut added = ADDED.write().unwrap_or_else(|e| e.into_inner());
     added.retain(|(_, s)| s.name != spec.name);

@@ -14,8 +14,9 @@
 //! net; its DC-motor substitute, kp 40 / kd 5, let them sag to 80% of standing), and IsaacLab's
 //! Spot PD (kp 60, kd 1.5). Stand-test gains are stiff gains for the standing check only.
 
+use crate::mesh::MeshHull;
 use crate::model::RobotModel;
-use crate::urdf::{UrdfError, load_urdf_str};
+use crate::urdf::{UrdfError, load_urdf_str_with_hulls};
 
 /// Number of actuated leg joints of every built-in robot.
 pub const NUM_JOINTS: usize = 12;
@@ -51,8 +52,11 @@ pub struct RobotSpec {
     pub display_name: &'static str,
     /// Family.
     pub family: Family,
-    /// The project's own URDF (primitive collision shapes), embedded.
+    /// The project's own URDF (primitive collision shapes), embedded; an added robot's URDF text.
     pub urdf: &'static str,
+    /// Hulls of the URDF's collision meshes (an added robot's, from its description); none for
+    /// the catalog's robots, whose URDFs have primitive shapes only.
+    pub mesh_hulls: &'static [MeshHull],
     /// Actuated joints in canonical order.
     pub joint_names: [&'static str; NUM_JOINTS],
     /// Default standing joint positions (rad), canonical order.
@@ -153,6 +157,7 @@ fn unitree(
         display_name,
         family: Family::Unitree,
         urdf,
+        mesh_hulls: &[],
         joint_names: UNITREE_JOINTS,
         default_pose: UNITREE_POSE,
         base_link,
@@ -185,6 +190,7 @@ fn anymal(
         display_name,
         family: Family::Anymal,
         urdf,
+        mesh_hulls: &[],
         joint_names: ANYMAL_JOINTS,
         default_pose: ANYMAL_POSE,
         base_link: "base",
@@ -266,6 +272,7 @@ fn build_all() -> Vec<RobotSpec> {
             display_name: "Boston Dynamics Spot",
             family: Family::Spot,
             urdf: include_str!("../assets/spot.urdf"),
+            mesh_hulls: &[],
             joint_names: SPOT_JOINTS,
             default_pose: SPOT_POSE,
             base_link: "body",
@@ -339,14 +346,19 @@ impl RobotSpec {
             })
     }
 
-    /// Parses the robot's URDF (embedded, or the added robot's file as loaded).
+    /// Parses the robot's URDF (embedded, or the added robot's file as loaded) with its
+    /// [`Self::mesh_hulls`].
     pub fn model(&self) -> Result<RobotModel, UrdfError> {
         let origin = if self.family == Family::Other {
             "robot"
         } else {
             "builtin"
         };
-        load_urdf_str(self.urdf, &format!("{origin}:{}", self.name))
+        load_urdf_str_with_hulls(
+            self.urdf,
+            &format!("{origin}:{}", self.name),
+            self.mesh_hulls,
+        )
     }
 
     /// Base height over flat ground at the default pose with feet on the ground (forward kinematics of

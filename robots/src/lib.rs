@@ -12,7 +12,10 @@
 //!   `spec.model()` parses the embedded URDF, `spec.nominal_standing_height()`.
 //! - [`urdf::load_urdf_file`] / [`urdf::load_urdf_str`] → [`model::RobotModel`] (bodies after fixed-joint
 //!   merging; `total_mass()`, `num_actuated()`, `joint_names()`, `standing_height(q)`), errors
-//!   [`urdf::UrdfError`] with file, element and line.
+//!   [`urdf::UrdfError`] with file, element and line. From a file, collision meshes found beside it
+//!   (STL, OBJ) are convex hulls ([`mesh`]); [`urdf::load_urdf_file_with_hulls`] returns them as
+//!   [`mesh::MeshHull`]s and [`urdf::load_urdf_str_with_hulls`] builds the same model from the text
+//!   (an added robot's description records them).
 //! - [`sim::SimWorld`]: `new(SimConfig)`, `add_flat_ground`, `add_heightfield_ground`, `add_robot(model,
 //!   binding, actuator, pose, q) -> index`, `set_targets`, `step` (one physics step, PD inside),
 //!   `clear_contact_maxima`, `read_state(i, &mut task::SimState)`, `reset_robot`, `push_base`,
@@ -51,6 +54,7 @@ pub mod gait;
 pub mod infer;
 pub mod io;
 pub mod math;
+pub mod mesh;
 pub mod mirror;
 pub mod model;
 pub mod morphology;

@@ -1,6 +1,6 @@
 //! The articulated-robot model the simulator builds from: [`RobotModel`], a tree of rigid
 //! [`BodySpec`]s (URDF links merged across fixed joints) connected by actuated [`JointSpec`]s, with
-//! primitive [`ShapeSpec`] colliders. Produced by [`crate::urdf`], consumed by [`crate::sim`].
+//! [`ShapeSpec`] colliders (primitives, and convex hulls of meshes). Produced by [`crate::urdf`], consumed by [`crate::sim`].
 //!
 //! Frames follow URDF: a body's frame is the frame of its first (movable) link, which coincides with
 //! its joint frame at zero joint angle. Math is `f32` glam (the types rapier uses).
@@ -8,8 +8,8 @@
 pub use crate::math::Pose;
 use crate::math::{Mat3, Rot3, Vec3};
 
-/// A primitive collision shape, in the body frame given by [`ColliderSpec::pose`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// A collision shape, in the body frame given by [`ColliderSpec::pose`].
+#[derive(Debug, Clone, PartialEq)]
 pub enum ShapeSpec {
     /// Box with half extents.
     Cuboid { half: Vec3 },
@@ -19,6 +19,9 @@ pub enum ShapeSpec {
     Capsule { half_length: f32, radius: f32 },
     /// Cylinder along the local z axis (URDF convention).
     Cylinder { half_length: f32, radius: f32 },
+    /// The convex hull of `points` (a mesh's vertices, scaled; see [`crate::mesh`]): at least 4
+    /// points not in one plane, at most [`crate::mesh::MAX_HULL_POINTS`].
+    ConvexHull { points: Vec<Vec3> },
 }
 
 /// A pose as plain arrays: translation and rotation quaternion `[x, y, z, w]` (for callers, such
@@ -37,7 +40,8 @@ pub struct ColliderSpec {
     pub pose: Pose,
     /// URDF link this collider came from (used for contact sensing: feet, base, thighs).
     pub link: String,
-    /// True when this is a stand-in for a mesh that could not be used.
+    /// True when this is a stand-in for a mesh that could not be used (a mesh used as a
+    /// [`ShapeSpec::ConvexHull`] is not a stand-in).
     pub stand_in: bool,
 }
 
@@ -173,7 +177,7 @@ impl RobotModel {
     /// Base height above flat ground when the robot stands on its lowest collider at the given
     /// joint positions (per actuated joint, in [`Self::joint_names`] order) with a level base: the
     /// negative of the lowest collider point in the base frame. Only spheres, capsules, boxes and
-    /// cylinders are considered.
+    /// cylinders and convex hulls are considered.
     pub fn standing_height(&self, q: &[f32]) -> f32 {
         let mut q_body = vec![0.0; self.bodies.len()];
         let mut k = 0;
@@ -216,6 +220,10 @@ fn lowest_z(shape: &ShapeSpec, p: &Pose) -> f32 {
             let radial = (1.0 - a.z * a.z).max(0.0).sqrt();
             c.z - a.z.abs() * half_length - radial * radius
         }
+        ShapeSpec::ConvexHull { ref points } => points
+            .iter()
+            .map(|q| (*p * *q).z)
+            .fold(f32::INFINITY, f32::min),
         ShapeSpec::Cuboid { half } => {
             let m = Mat3::from_quat(p.rotation);
             let ext =

@@ -368,30 +368,9 @@ impl SimWorld {
                 .build();
             let h = self.world.bodies.insert(rb);
             for c in &b.colliders {
-                let shape = match c.shape {
-                    ShapeSpec::Cuboid { half } => SharedShape::cuboid(half.x, half.y, half.z),
-                    ShapeSpec::Sphere { radius } => SharedShape::ball(radius),
-                    ShapeSpec::Capsule {
-                        half_length,
-                        radius,
-                    } => SharedShape::capsule_z(half_length, radius),
-                    ShapeSpec::Cylinder {
-                        half_length,
-                        radius,
-                    } => SharedShape::cylinder(half_length, radius),
-                };
-                // parry cylinders are along y, URDF's along z.
-                let pose = match c.shape {
-                    ShapeSpec::Cylinder { .. } => {
-                        c.pose
-                            * Pose::from_rotation(Rot3::from_rotation_x(
-                                std::f32::consts::FRAC_PI_2,
-                            ))
-                    }
-                    _ => c.pose,
-                };
+                let (shape, local) = collider_shape(&c.shape, &c.link);
                 let col = ColliderBuilder::new(shape)
-                    .position(pose)
+                    .position(c.pose * local)
                     .density(0.0)
                     .friction(1.0)
                     .friction_combine_rule(CoefficientCombineRule::Multiply)
@@ -975,6 +954,49 @@ impl SimWorld {
             .get(h)
             .map(|b| (b.translation(), b.linvel()))
     }
+}
+
+/// The parry shape of `shape` and its pose in the shape's frame (parry cylinders are along y,
+/// URDF's along z). Hull points are checked for volume when loaded; should parry still find them
+/// degenerate, their bounding box stands in (with a warning naming `link`).
+fn collider_shape(shape: &ShapeSpec, link: &str) -> (SharedShape, Pose) {
+    match *shape {
+        ShapeSpec::Cuboid { half } => (SharedShape::cuboid(half.x, half.y, half.z), Pose::IDENTITY),
+        ShapeSpec::Sphere { radius } => (SharedShape::ball(radius), Pose::IDENTITY),
+        ShapeSpec::Capsule {
+            half_length,
+            radius,
+        } => (SharedShape::capsule_z(half_length, radius), Pose::IDENTITY),
+        ShapeSpec::Cylinder {
+            half_length,
+            radius,
+        } => (
+            SharedShape::cylinder(half_length, radius),
+            Pose::from_rotation(Rot3::from_rotation_x(std::f32::consts::FRAC_PI_2)),
+        ),
+        ShapeSpec::ConvexHull { ref points } => match SharedShape::convex_hull(points) {
+            Some(hull) => (hull, Pose::IDENTITY),
+            None => {
+                let lo = points.iter().fold(Vec3::INFINITY, |a, p| a.min(*p));
+                let hi = points.iter().fold(Vec3::NEG_INFINITY, |a, p| a.max(*p));
+                let half = (0.5 * (hi - lo)).max(Vec3::splat(1e-3));
+                tracing::warn!(
+                    "link `{link}`: no convex hull of its {} mesh points; their bounding box stands in",
+                    points.len()
+                );
+                (
+                    SharedShape::cuboid(half.x, half.y, half.z),
+                    Pose::from_translation(0.5 * (lo + hi)),
+                )
+            }
+        },
+    }
+}
+
+/// The triangles of the convex hull of `points` (a [`ShapeSpec::ConvexHull`]) for viewers: its
+/// vertices and their index triples; `None` when the points have no volume.
+pub fn convex_hull_mesh(points: &[Vec3]) -> Option<(Vec<Vec3>, Vec<[u32; 3]>)> {
+    rapier3d::parry::transformation::try_convex_hull(points).ok()
 }
 
 fn origin_x_plus(origin: f32, size: f32) -> f32 {

@@ -11,19 +11,27 @@
 //! 2. `urdf-rs` parses the cleaned text.
 //! 3. Links are merged across fixed joints into rigid bodies (masses, centres of mass and inertia
 //!    tensors combined with the parallel-axis rule, colliders re-expressed in the body frame).
-//!    Mesh colliders (`package://` or missing files: this crate reads no meshes) get primitive
-//!    stand-ins, [`MeshStandIn`]: on a leg link, capsules along the link's joint-to-child segments
-//!    with a radius from its inertia, stopping short of a foot's shapes, so that no stand-in hangs
-//!    below the feet; on the trunk and on leaf links (nothing to run a segment to), a box sized
-//!    from the link's inertia. Each replaced mesh is named in `warnings` with its stand-in. Links
-//!    without inertia or with zero mass contribute nothing, and a moving body left with no mass
-//!    gets a small placeholder mass (recorded in `warnings`).
+//!    A mesh collider of a URDF loaded from a file ([`load_urdf_file`]) whose STL or OBJ file is
+//!    found beside it (relative, `package://` and `file://` paths: see [`crate::mesh`]) is the
+//!    convex hull of its scaled vertices ([`ShapeSpec::ConvexHull`], at most
+//!    [`crate::mesh::MAX_HULL_POINTS`] points), named in `warnings`; text loaded with the hulls
+//!    such a load returned ([`load_urdf_file_with_hulls`] → [`load_urdf_str_with_hulls`]: an added
+//!    robot, whose description records them) gets the same hulls. Any other mesh collider — a
+//!    URDF loaded from text alone ([`load_urdf_str`]: no directory to look in), a missing file,
+//!    Collada, an unreadable, empty, flat or non-finite mesh (a warning names the file and why) — gets
+//!    primitive stand-ins, [`MeshStandIn`]: on a leg link, capsules along the link's
+//!    joint-to-child segments with a radius from its inertia, stopping short of a foot's shapes,
+//!    so that no stand-in hangs below the feet; on the trunk and on leaf links (nothing to run a
+//!    segment to), a box sized from the link's inertia. Each replaced mesh is named in `warnings`
+//!    with its stand-in. Links without inertia or with zero mass contribute no mass, and a moving
+//!    body left with no mass gets a small placeholder mass (recorded in `warnings`).
 //!    Continuous joints have no limits. Floating, planar and spherical joints are rejected.
 
 use std::collections::HashMap;
 use std::path::Path;
 
 use crate::math::{Mat3, Pose, Rot3, Vec3};
+use crate::mesh::MeshHull;
 use xml::common::Position;
 use xml::reader::{EventReader, ParserConfig, XmlEvent};
 use xml::writer::EmitterConfig;
@@ -86,18 +94,31 @@ pub enum UrdfError {
     },
 }
 
-/// Loads a URDF file from disk.
+/// Loads a URDF file from disk; collision meshes found beside it are convex hulls (module doc).
 pub fn load_urdf_file(path: impl AsRef<Path>) -> Result<RobotModel, UrdfError> {
+    load_urdf_file_with_hulls(path).map(|(model, _)| model)
+}
+
+/// [`load_urdf_file`], with the hull of every mesh used as one (each file and scale once, in the
+/// file's order): what [`load_urdf_str_with_hulls`] needs to build the same model from the text.
+pub fn load_urdf_file_with_hulls(
+    path: impl AsRef<Path>,
+) -> Result<(RobotModel, Vec<MeshHull>), UrdfError> {
     let path = path.as_ref();
     let file = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|source| UrdfError::Io {
         file: file.clone(),
         source,
     })?;
-    load_urdf_str(&text, &file)
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    load(&text, &file, MeshStandIn::default(), MeshSource::Dir(dir))
 }
 
-/// Loads a URDF document from text; `file` names it in errors.
+/// Loads a URDF document from text; `file` names it in errors. No mesh is read (there is no
+/// directory to find one in): every mesh collider gets stand-ins.
 pub fn load_urdf_str(text: &str, file: &str) -> Result<RobotModel, UrdfError> {
     load_urdf_str_with(text, file, MeshStandIn::default())
 }
@@ -108,15 +129,49 @@ pub fn load_urdf_str_with(
     file: &str,
     stand_in: MeshStandIn,
 ) -> Result<RobotModel, UrdfError> {
+    load(text, file, stand_in, MeshSource::None).map(|(model, _)| model)
+}
+
+/// Loads a URDF document from text whose mesh colliders are the given `hulls` (matched by the
+/// `<mesh>`'s filename and scale, as [`load_urdf_file_with_hulls`] returned them): an added
+/// robot's model where only its URDF text and description travel. A mesh without a hull, or
+/// whose points make no hull (checked as a mesh file's are), gets stand-ins.
+pub fn load_urdf_str_with_hulls(
+    text: &str,
+    file: &str,
+    hulls: &[MeshHull],
+) -> Result<RobotModel, UrdfError> {
+    load(text, file, MeshStandIn::default(), MeshSource::Hulls(hulls)).map(|(model, _)| model)
+}
+
+/// Where the points of mesh colliders come from.
+#[derive(Debug, Clone, Copy)]
+enum MeshSource<'a> {
+    /// Nowhere: every mesh gets stand-ins.
+    None,
+    /// Mesh files looked for relative to this directory (the URDF's).
+    Dir(&'a Path),
+    /// Hulls given by filename and scale (an added robot's description).
+    Hulls(&'a [MeshHull]),
+}
+
+/// Loads a URDF document whose meshes come from `meshes`; also returns the hulls used.
+fn load(
+    text: &str,
+    file: &str,
+    stand_in: MeshStandIn,
+    meshes: MeshSource,
+) -> Result<(RobotModel, Vec<MeshHull>), UrdfError> {
     let cleaned = prepass(text, file)?;
     let robot = urdf_rs::read_from_string(&cleaned).map_err(|e| UrdfError::Parse {
         file: file.to_string(),
         message: e.to_string(),
     })?;
-    build(&robot, file, stand_in)
+    build(&robot, file, stand_in, meshes)
 }
 
-/// What replaces a mesh collider (this crate reads no meshes).
+/// What replaces a mesh collider that is not used as a convex hull (a URDF loaded from text, or
+/// a mesh file missing or unreadable: see the module doc).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum MeshStandIn {
     /// On links of moving bodies that have child joints: a capsule along each segment from the
@@ -167,8 +222,16 @@ fn dense_box_half(m: f32, d: Vec3) -> Vec3 {
     }
 }
 
-/// Radius of a sphere about the shape's frame that holds the shape.
-fn bounding_radius(g: &urdf_rs::Geometry, inertial: &urdf_rs::Inertial) -> f32 {
+/// Radius of a sphere about the shape's frame that holds the shape; `hull`: the points of a mesh
+/// used as a convex hull.
+fn bounding_radius(
+    g: &urdf_rs::Geometry,
+    hull: Option<&[Vec3]>,
+    inertial: &urdf_rs::Inertial,
+) -> f32 {
+    if let Some(points) = hull {
+        return points.iter().map(|p| p.length()).fold(0.0, f32::max);
+    }
     match g {
         urdf_rs::Geometry::Box { size } => v3(size).length() * 0.5,
         urdf_rs::Geometry::Sphere { radius } => *radius as f32,
@@ -525,13 +588,79 @@ struct Builder<'a> {
     acc: Vec<MassAcc>,
     warnings: Vec<String>,
     stand_in: MeshStandIn,
+    /// Each mesh collider (link index, collision index) that was looked for: its hull points or
+    /// why there are none. Empty for a URDF loaded from text.
+    meshes: HashMap<(usize, usize), Result<Vec<Vec3>, String>>,
+}
+
+/// The hull points of every collision mesh of `robot` by (link, collision) index, or why it has
+/// none (each file and scale read or checked once); no entry for a mesh without a source.
+fn read_meshes(
+    robot: &urdf_rs::Robot,
+    source: MeshSource,
+) -> HashMap<(usize, usize), Result<Vec<Vec3>, String>> {
+    let mut by_file: HashMap<(&str, [u32; 3]), Option<Result<Vec<Vec3>, String>>> = HashMap::new();
+    let mut out = HashMap::new();
+    for (li, link) in robot.links.iter().enumerate() {
+        for (ci, col) in link.collision.iter().enumerate() {
+            if let urdf_rs::Geometry::Mesh { filename, scale } = &col.geometry {
+                let scale = scale.as_ref().map_or(Vec3::ONE, v3);
+                let read = by_file
+                    .entry((filename.as_str(), scale.to_array().map(f32::to_bits)))
+                    .or_insert_with(|| match source {
+                        MeshSource::None => None,
+                        MeshSource::Dir(dir) => Some(crate::mesh::load_hull(filename, scale, dir)),
+                        MeshSource::Hulls(hulls) => hulls
+                            .iter()
+                            .find(|h| h.file == *filename && h.scale == scale.to_array())
+                            .map(|h| {
+                                let points: Vec<Vec3> =
+                                    h.points.iter().map(|p| Vec3::from_array(*p)).collect();
+                                crate::mesh::hull_points(&points, Vec3::ONE).map_err(|why| {
+                                    format!("its hull in the robot description: {why}")
+                                })
+                            }),
+                    });
+                if let Some(read) = read {
+                    out.insert((li, ci), read.clone());
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The hulls of `meshes` by filename and scale, each once, in the file's order.
+fn used_hulls(
+    robot: &urdf_rs::Robot,
+    meshes: &HashMap<(usize, usize), Result<Vec<Vec3>, String>>,
+) -> Vec<MeshHull> {
+    let mut out: Vec<MeshHull> = Vec::new();
+    for (li, link) in robot.links.iter().enumerate() {
+        for (ci, col) in link.collision.iter().enumerate() {
+            if let urdf_rs::Geometry::Mesh { filename, scale } = &col.geometry
+                && let Some(Ok(points)) = meshes.get(&(li, ci))
+            {
+                let scale = scale.as_ref().map_or(Vec3::ONE, v3).to_array();
+                if !out.iter().any(|h| h.file == *filename && h.scale == scale) {
+                    out.push(MeshHull {
+                        file: filename.clone(),
+                        scale,
+                        points: points.iter().map(|p| p.to_array()).collect(),
+                    });
+                }
+            }
+        }
+    }
+    out
 }
 
 fn build(
     robot: &urdf_rs::Robot,
     file: &str,
     stand_in: MeshStandIn,
-) -> Result<RobotModel, UrdfError> {
+    source: MeshSource,
+) -> Result<(RobotModel, Vec<MeshHull>), UrdfError> {
     let structure = |message: String| UrdfError::Structure {
         file: file.to_string(),
         message,
@@ -590,19 +719,30 @@ fn build(
         acc: Vec::new(),
         warnings: Vec::new(),
         stand_in,
+        meshes: read_meshes(robot, source),
     };
     b.new_body(&robot.links[root].name, None, None);
     b.visit(root, 0, Pose::IDENTITY, 0)?;
     b.finish();
-    Ok(RobotModel {
+    let hulls = used_hulls(robot, &b.meshes);
+    let model = RobotModel {
         name: robot.name.clone(),
         source: file.to_string(),
         bodies: b.bodies,
         warnings: b.warnings,
-    })
+    };
+    Ok((model, hulls))
 }
 
 impl<'a> Builder<'a> {
+    /// The hull points of link `li`'s collision `ci`, when it is a mesh used as a hull.
+    fn hull(&self, li: usize, ci: usize) -> Option<&[Vec3]> {
+        match self.meshes.get(&(li, ci)) {
+            Some(Ok(points)) => Some(points),
+            _ => None,
+        }
+    }
+
     fn new_body(&mut self, name: &str, parent: Option<usize>, joint: Option<JointSpec>) -> usize {
         self.bodies.push(BodySpec {
             name: name.to_string(),
@@ -650,7 +790,7 @@ impl<'a> Builder<'a> {
         }
         // Colliders.
         let mut meshes_replaced = false;
-        for col in &link.collision {
+        for (ci, col) in link.collision.iter().enumerate() {
             let pose = t * pose_of(&col.origin);
             let shape = match &col.geometry {
                 urdf_rs::Geometry::Box { size } => Some(ShapeSpec::Cuboid {
@@ -667,8 +807,24 @@ impl<'a> Builder<'a> {
                     half_length: *length as f32 * 0.5,
                     radius: *radius as f32,
                 }),
+                urdf_rs::Geometry::Mesh { filename, .. }
+                    if let Some(points) = self.hull(li, ci).map(<[Vec3]>::to_vec) =>
+                {
+                    self.warnings.push(format!(
+                        "link `{}`: mesh `{filename}` used as a convex hull of {} points",
+                        link.name,
+                        points.len()
+                    ));
+                    Some(ShapeSpec::ConvexHull { points })
+                }
                 urdf_rs::Geometry::Mesh { filename, .. } => {
-                    // No mesh is read: primitives stand in for it (see `MeshStandIn`).
+                    if let Some(Err(why)) = self.meshes.get(&(li, ci)).cloned() {
+                        self.warnings.push(format!(
+                            "link `{}`: mesh `{filename}` not used: {why}",
+                            link.name
+                        ));
+                    }
+                    // Primitives stand in for the mesh (see `MeshStandIn`).
                     let mut segments = match self.stand_in {
                         MeshStandIn::Segments if body != 0 => {
                             self.segment_ends(li, Pose::IDENTITY, 0)
@@ -823,8 +979,8 @@ impl<'a> Builder<'a> {
             return None;
         }
         let mut extent: f32 = 0.0;
-        for col in &link.collision {
-            let r = bounding_radius(&col.geometry, &link.inertial);
+        for (ci, col) in link.collision.iter().enumerate() {
+            let r = bounding_radius(&col.geometry, self.hull(li, ci), &link.inertial);
             extent = extent.max(v3(&col.origin.xyz).length() + r);
         }
         for &ji in self.children.get(link.name.as_str()).into_iter().flatten() {

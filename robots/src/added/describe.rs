@@ -12,7 +12,9 @@ use crate::task::MAX_PENALISED_BODIES;
 use super::*;
 
 /// Infers a description of `model` (loaded from a file the description will call `urdf_file`),
-/// and checks by simulation that it stands (unless `force`).
+/// and checks by simulation that it stands (unless `force`). Its `mesh_hulls` are left empty: a
+/// caller that loaded `model` with [`crate::urdf::load_urdf_file_with_hulls`] records the hulls
+/// that call returned, so that the registered robot has the colliders checked here.
 pub fn describe(
     model: &RobotModel,
     urdf_file: &str,
@@ -107,6 +109,7 @@ pub fn describe(
         action_scale: overrides.action_scale.unwrap_or(DEFAULT_ACTION_SCALE),
         spawn_height: round(standing_height + 0.02, 1e-3),
         mass: round(mass, 1e-3),
+        mesh_hulls: Vec::new(),
         name,
     };
     description.validate()?;
