@@ -657,6 +657,10 @@ pub struct WalkOutcome {
     /// tall, steps and is smooth, turning or not): its iteration and samples.
     #[serde(default)]
     pub gait: Option<(u64, u64)>,
+    /// The first check at which xy tracking held at every checked speed, whatever else failed:
+    /// its iteration and samples. The samples between it and walking went to the other bounds.
+    #[serde(default)]
+    pub tracks: Option<(u64, u64)>,
     /// The checked rows (0.5 and 1.0 m/s; only 1.0 when it failed there).
     #[serde(default)]
     pub rows: Vec<crate::eval_cmd::EvalRow>,
@@ -671,6 +675,14 @@ pub fn only_heading_fails<'a>(mut failures: impl Iterator<Item = &'a str>) -> bo
     failures.all(|f| f.starts_with(HEADING_FAILURE))
 }
 
+/// How the walk criterion words an xy tracking failure (`l3p_robots::gait::WalkCriterion`).
+const TRACKING_FAILURE: &str = "xy tracking error";
+
+/// Whether no failing bound is the xy tracking bound: the policy goes where it is told.
+pub fn tracking_holds<'a>(mut failures: impl Iterator<Item = &'a str>) -> bool {
+    !failures.any(|f| f.starts_with(TRACKING_FAILURE))
+}
+
 /// Where an `--until-walks` arm stands once its trainer exited.
 #[derive(Debug, Clone, PartialEq)]
 pub enum WalkProgress {
@@ -679,6 +691,50 @@ pub enum WalkProgress {
     /// Stopped before the cap without walking (interrupted): resume it; its check history stays
     /// in `walk_checks.jsonl`.
     Interrupted { iteration: u64 },
+}
+
+/// The walk checks an `--until-walks` run recorded (`<run_dir>/walk_checks.jsonl`), oldest first;
+/// lines that do not parse are skipped.
+pub fn read_walk_checks(run_dir: &Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(run_dir.join("walk_checks.jsonl"))
+        .unwrap_or_default()
+        .lines()
+        .filter_map(|l| serde_json::from_str(l).ok())
+        .collect()
+}
+
+/// The first walk checks at which parts of the criterion held: (iteration, samples) each.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Milestones {
+    /// Every bound but the heading bound ([`WalkOutcome::gait`]).
+    pub gait: Option<(u64, u64)>,
+    /// The xy tracking bound ([`WalkOutcome::tracks`]).
+    pub tracks: Option<(u64, u64)>,
+}
+
+/// [`Milestones`] of a run's walk checks (as [`read_walk_checks`] returns them).
+pub fn milestones(checks: &[serde_json::Value], samples_per_iteration: u64) -> Milestones {
+    // The first check whose every row's failures satisfy `holds`.
+    let first_check = |holds: &dyn Fn(&[serde_json::Value]) -> bool| {
+        checks
+            .iter()
+            .find(|c| {
+                c["rows"].as_array().is_some_and(|rows| {
+                    !rows.is_empty()
+                        && rows.iter().all(|r| {
+                            r["walk_failures"].as_array().is_some_and(|f| {
+                                f.iter().all(serde_json::Value::is_string) && holds(f)
+                            })
+                        })
+                })
+            })
+            .and_then(|c| c["iteration"].as_u64())
+            .map(|i| (i, i * samples_per_iteration))
+    };
+    Milestones {
+        gait: first_check(&|f| only_heading_fails(f.iter().filter_map(|x| x.as_str()))),
+        tracks: first_check(&|f| tracking_holds(f.iter().filter_map(|x| x.as_str()))),
+    }
 }
 
 /// Reads an `--until-walks` run's `walk.json` and `walk_checks.jsonl`. `reached` is the last
@@ -695,29 +751,11 @@ pub fn walk_progress(
         .ok()
         .and_then(|t| serde_json::from_str(&t).ok())
         .unwrap_or(serde_json::Value::Null);
-    let checks: Vec<serde_json::Value> = std::fs::read_to_string(run_dir.join("walk_checks.jsonl"))
-        .unwrap_or_default()
-        .lines()
-        .filter_map(|l| serde_json::from_str(l).ok())
-        .collect();
+    let checks = read_walk_checks(run_dir);
     let rows_of = |v: &serde_json::Value| -> Vec<crate::eval_cmd::EvalRow> {
         serde_json::from_value(v["rows"].clone()).unwrap_or_default()
     };
-    let gait = checks
-        .iter()
-        .find(|c| {
-            c["rows"].as_array().is_some_and(|rows| {
-                !rows.is_empty()
-                    && rows.iter().all(|r| {
-                        r["walk_failures"].as_array().is_some_and(|f| {
-                            f.iter().all(serde_json::Value::is_string)
-                                && only_heading_fails(f.iter().filter_map(|x| x.as_str()))
-                        })
-                    })
-            })
-        })
-        .and_then(|c| c["iteration"].as_u64())
-        .map(|i| (i, i * samples_per_iteration));
+    let Milestones { gait, tracks } = milestones(&checks, samples_per_iteration);
     if walk["walks"].as_bool() == Some(true) {
         let iteration = walk["iteration"].as_u64().unwrap_or(reached);
         return WalkProgress::Settled(WalkOutcome {
@@ -731,6 +769,7 @@ pub fn walk_progress(
             failures: Vec::new(),
             checks: checks.len(),
             gait,
+            tracks,
             rows: rows_of(&walk),
         });
     }
@@ -756,6 +795,7 @@ pub fn walk_progress(
         failures,
         checks: checks.len(),
         gait,
+        tracks,
         rows,
     })
 }
@@ -1273,8 +1313,8 @@ pub fn samples_to_walk_table(results: &[ArmResult]) -> String {
             .collect()
     };
     let mut md = String::from(
-        "| robot | method | walked | samples to walk, median (M) | range (M) | vs scratch | iterations, median | gait without the heading bound: median (M), vs scratch | started walking |\n\
-         |---|---|---|---|---|---|---|---|---|\n",
+        "| robot | method | walked | samples to walk, median (M) | range (M) | vs scratch | iterations, median | tracking (xy error within its bound): median (M), vs scratch | gait without the heading bound: median (M), vs scratch | started walking |\n\
+         |---|---|---|---|---|---|---|---|---|---|\n",
     );
     for (robot, method, variant) in &keys {
         let arms = group(robot, *method, variant.as_deref());
@@ -1310,28 +1350,33 @@ pub fn samples_to_walk_table(results: &[ArmResult]) -> String {
         let its = censored_median(&its)
             .map(|m| format!("{}{:.0}", if m.at_least { "≥ " } else { "" }, m.value))
             .unwrap_or_else(|| "—".into());
-        let gait_samples = |arms: &[&ArmResult]| -> Vec<(f64, bool)> {
-            arms.iter()
-                .filter_map(|r| r.walk.as_ref())
-                .map(|w| match w.gait {
-                    Some((_, samples)) => (samples as f64 / 1e6, false),
-                    None => (w.samples as f64 / 1e6, true),
-                })
-                .collect()
-        };
-        let gait_median = censored_median(&gait_samples(&arms));
-        let gait = match gait_median {
-            Some(g) => {
-                let vs = if transfer_source(*method).is_none() && variant.is_none() {
-                    "1×".to_string()
-                } else {
-                    censored_median(&gait_samples(&group(robot, scratch_method, None)))
-                        .map_or_else(|| "—".into(), |sc| censored_ratio(g, sc))
-                };
-                format!("{}{:.2}, {vs}", if g.at_least { "≥ " } else { "" }, g.value)
+        // Samples to a milestone (an arm that never reached it counts as its cap, censored),
+        // median and ratio to the same robot's scratch arms.
+        let milestone = |pick: fn(&WalkOutcome) -> Option<(u64, u64)>| -> String {
+            let samples_to = |arms: &[&ArmResult]| -> Vec<(f64, bool)> {
+                arms.iter()
+                    .filter_map(|r| r.walk.as_ref())
+                    .map(|w| match pick(w) {
+                        Some((_, samples)) => (samples as f64 / 1e6, false),
+                        None => (w.samples as f64 / 1e6, true),
+                    })
+                    .collect()
+            };
+            match censored_median(&samples_to(&arms)) {
+                Some(g) => {
+                    let vs = if transfer_source(*method).is_none() && variant.is_none() {
+                        "1×".to_string()
+                    } else {
+                        censored_median(&samples_to(&group(robot, scratch_method, None)))
+                            .map_or_else(|| "—".into(), |sc| censored_ratio(g, sc))
+                    };
+                    format!("{}{:.2}, {vs}", if g.at_least { "≥ " } else { "" }, g.value)
+                }
+                None => "—".into(),
             }
-            None => "—".into(),
         };
+        let tracks = milestone(|w| w.tracks);
+        let gait = milestone(|w| w.gait);
         let zero: Vec<bool> = arms
             .iter()
             .filter_map(|r| r.zero_shot_walk.as_ref().map(|w| w.walks))
@@ -1342,7 +1387,7 @@ pub fn samples_to_walk_table(results: &[ArmResult]) -> String {
             format!("{}/{}", zero.iter().filter(|w| **w).count(), zero.len())
         };
         md.push_str(&format!(
-            "| {robot} | {} | {walked}/{} | {} | {range} | {vs} | {its} | {gait} | {zero} |\n",
+            "| {robot} | {} | {walked}/{} | {} | {range} | {vs} | {its} | {tracks} | {gait} | {zero} |\n",
             method_label(*method, variant.as_deref()),
             s.len(),
             median

@@ -548,9 +548,14 @@ fn initial_walk_check(arm: &Arm) -> anyhow::Result<WalkOutcome> {
         rows.iter()
             .flat_map(|r| r.walk_failures.iter().map(String::as_str)),
     );
+    let tracks = crate::experiment::tracking_holds(
+        rows.iter()
+            .flat_map(|r| r.walk_failures.iter().map(String::as_str)),
+    );
     Ok(WalkOutcome {
         walks,
         gait: gait_only.then_some((0, 0)),
+        tracks: tracks.then_some((0, 0)),
         iteration: 0,
         last_check: 0,
         samples: 0,
@@ -783,7 +788,15 @@ fn collect_results(arms: &[Arm], finished: &[Finished], window: usize) -> Vec<Ar
                     .find(|r| r.forward.is_none())
                     .map(|r| r.summary.episode_return as f64)
             }),
-            walk: done.walk.clone(),
+            walk: done.walk.clone().map(|mut w| {
+                // Arms finished before `tracks` existed: read it from their check history.
+                if w.tracks.is_none() {
+                    let checks = crate::experiment::read_walk_checks(&arm.run_dir());
+                    w.tracks =
+                        crate::experiment::milestones(&checks, arm.samples_per_iteration()).tracks;
+                }
+                w
+            }),
             zero_shot_walk: done.zero_shot_walk.clone(),
         });
     }

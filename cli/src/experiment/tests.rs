@@ -583,6 +583,7 @@ fn until_walks_bookkeeping_walked_never_walked_and_interrupted() {
     };
     assert!(w.walks);
     assert_eq!(w.gait, Some((25, 25 * 12_288)));
+    assert_eq!(w.tracks, Some((25, 25 * 12_288)));
     assert_eq!((w.iteration, w.samples, w.checks), (25, 307_200, 1));
     assert_eq!(w.wall_seconds, Some(100.0));
     // Never walks: at the cap it is settled as "not within the cap", samples a lower bound, the
@@ -592,7 +593,7 @@ fn until_walks_bookkeeping_walked_never_walked_and_interrupted() {
         &never,
         serde_json::json!({"walks": false}),
         &[
-            check_line(25, &["falls"]),
+            check_line(25, &["xy tracking error 0.992 > 0.200 m/s", "falls"]),
             check_line(50, &["heading changes 40° per episode (want <= 15°)"]),
         ],
     );
@@ -610,6 +611,7 @@ fn until_walks_bookkeeping_walked_never_walked_and_interrupted() {
         Some((50, 50_000)),
         "its gait held but for the heading at 50"
     );
+    assert_eq!(w.tracks, Some((50, 50_000)), "it tracked from 50 on");
     assert_eq!(w.wall_seconds, None);
     // Interrupted before the cap (its trainer writes walks: false on the way out): resume, and
     // the check history stays for the resumed run to append to.
@@ -653,6 +655,7 @@ fn walked(robot: &str, method: Mode, seed: u64, samples: Option<u64>) -> ArmResu
         failures: Vec::new(),
         checks: 1,
         gait: samples.map(|s| (s / 2_000, s / 2)),
+        tracks: samples.map(|s| (s / 4_000, s / 4)),
         rows: Vec::new(),
     });
     r
@@ -698,6 +701,15 @@ fn samples_to_walk_medians_ratios_and_bounds() {
         "{scratch}"
     );
     assert!(scratch.contains("0.18–>0.30"), "{scratch}");
+    // Samples to track, then to the gait without the heading bound: 0.05 M, then 0.10 M.
+    assert!(
+        t.lines()
+            .next()
+            .unwrap()
+            .contains("| tracking (xy error within its bound)"),
+        "{t}"
+    );
+    assert!(scratch.contains("| 0.05, 1× | 0.10, 1× |"), "{scratch}");
     // Transfer: 0.03 M against 0.20 M.
     let transfer = row("go1", "l3p-transfer");
     assert!(
