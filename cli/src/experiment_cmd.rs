@@ -544,14 +544,8 @@ fn initial_walk_check(arm: &Arm) -> anyhow::Result<WalkOutcome> {
     let (_, bytes) = crate::train_cmd::start_export(&arm.config)?;
     let (rows, walks) = crate::train_cmd::walk_check_export(&arm.config, bytes)?;
     let failures: Vec<String> = rows.iter().flat_map(|r| r.walk_failures.clone()).collect();
-    let gait_only = crate::experiment::only_heading_fails(
-        rows.iter()
-            .flat_map(|r| r.walk_failures.iter().map(String::as_str)),
-    );
-    let tracks = crate::experiment::tracking_holds(
-        rows.iter()
-            .flat_map(|r| r.walk_failures.iter().map(String::as_str)),
-    );
+    let gait_only = crate::experiment::only_heading_fails(failures.iter().map(String::as_str));
+    let tracks = crate::experiment::tracking_holds(failures.iter().map(String::as_str));
     Ok(WalkOutcome {
         walks,
         gait: gait_only.then_some((0, 0)),
