@@ -2,7 +2,7 @@
 //! the Zenoh side of collecting experience for the learner.
 //!
 //! Main types: [`RolloutEnv`] (what the actor needs from a vectorised environment; implemented for
-//! `l3p_robots::VecEnv`), [`Collector`] (fills a [`RolloutChunk`] with `steps` control steps under one
+//! `l3p_sim::vecenv::VecEnv`), [`Collector`] (fills a [`RolloutChunk`] with `steps` control steps under one
 //! policy version), [`ActorOptions`] and [`run`] (the daemon loop), [`announce::AnnounceTracker`]
 //! (which policy to collect with next: a pure, unit-tested state machine).
 //!
@@ -26,11 +26,11 @@ use l3p_infer::{DeployPolicy, InferScratch};
 use l3p_proto::{
     EpisodeStats, MetricsRecord, PolicyAnnounce, RolloutChunk, WeightsBlob, codec, keys,
 };
-use l3p_robots::catalog::RobotSpec;
-use l3p_robots::config::EnvConfig;
-use l3p_robots::gait::{GaitReport, TrackingSummary};
-use l3p_robots::task::DoneReason;
-use l3p_robots::vecenv::VecEnv;
+use l3p_robot::catalog::RobotSpec;
+use l3p_sim::vecenv::VecEnv;
+use l3p_task::config::EnvConfig;
+use l3p_task::gait::{GaitReport, TrackingSummary};
+use l3p_task::task::DoneReason;
 use rand::SeedableRng;
 use rand::rngs::StdRng;
 use tokio_util::sync::CancellationToken;
@@ -161,7 +161,7 @@ impl RolloutEnv for SimEnv {
         let _ = self.env.set_action_means(means);
     }
     fn reward_term_names(&self) -> Vec<String> {
-        l3p_robots::task::RewardTerm::ALL
+        l3p_task::task::RewardTerm::ALL
             .iter()
             .map(|t| t.as_str().to_string())
             .collect()
@@ -558,7 +558,7 @@ pub struct EvalSummary {
 }
 
 impl EvalSummary {
-    /// The tracking half, for [`l3p_robots::gait::WalkCriterion::failures`].
+    /// The tracking half, for [`l3p_task::gait::WalkCriterion::failures`].
     pub fn tracking(&self) -> TrackingSummary {
         TrackingSummary {
             lin_vel_error: self.lin_vel_error,

@@ -102,12 +102,12 @@ async fn resolve_robot(
     registry: &l3p_registry::RegistryClient,
     name: &str,
     data_dir: &std::path::Path,
-) -> anyhow::Result<&'static l3p_robots::catalog::RobotSpec> {
-    let unknown = match l3p_robots::catalog::RobotSpec::by_name(name) {
+) -> anyhow::Result<&'static l3p_robot::catalog::RobotSpec> {
+    let unknown = match l3p_robot::catalog::RobotSpec::by_name(name) {
         Ok(robot) => return Ok(robot),
         Err(e) => e,
     };
-    let key = l3p_robots::added::sanitize_name(name);
+    let key = l3p_robot::added::sanitize_name(name);
     let reference = format!("{}@latest", crate::robots_cmd::robot_artifact(&key));
     let fetched = registry.try_get_blob(&reference).await;
     match fetched {

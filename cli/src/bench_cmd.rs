@@ -2,9 +2,9 @@
 //! (all task work included) and prints control steps per second and stage timings.
 
 use clap::{Args, Subcommand, ValueEnum};
-use l3p_robots::bench::run_sim_bench;
-use l3p_robots::catalog::RobotSpec;
-use l3p_robots::config::{EnvConfig, TerrainConfig, TerrainPreset};
+use l3p_robot::catalog::RobotSpec;
+use l3p_sim::bench::run_sim_bench;
+use l3p_task::config::{EnvConfig, TerrainConfig, TerrainPreset};
 
 /// `l3p bench ...`
 #[derive(Debug, Args)]
@@ -245,7 +245,7 @@ fn learner(a: LearnerBenchArgs) -> anyhow::Result<()> {
             .actors
             .first()
             .ok_or_else(|| anyhow::anyhow!("{} has no [[actors]]", path.display()))?;
-        let spec = l3p_robots::catalog::RobotSpec::by_name(&actor.robot)?;
+        let spec = l3p_robot::catalog::RobotSpec::by_name(&actor.robot)?;
         cfg.obs_dim = config.env.obs_dim();
         cfg.action_dim = spec.joint_names.len();
         cfg.envs = actor.envs;

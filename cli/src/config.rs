@@ -13,7 +13,7 @@ pub struct Config {
     pub run: RunConfig,
     pub zenoh: l3p_net::ZenohSettings,
     /// Simulation and locomotion task (terrain, commands, rewards, noise, randomisation).
-    pub env: l3p_robots::config::EnvConfig,
+    pub env: l3p_task::config::EnvConfig,
     /// Networks: architecture (`mlp` | `l3p`), latent sizes, hidden sizes, recovery modules.
     pub model: l3p_policy::PolicyConfig,
     /// PPO hyperparameters and training mode.
@@ -58,7 +58,7 @@ impl Config {
             if actor.threads == 0 {
                 return Err(format!("{} = 0: expected >= 1", key("threads")));
             }
-            l3p_robots::catalog::RobotSpec::by_name(&actor.robot)
+            l3p_robot::catalog::RobotSpec::by_name(&actor.robot)
                 .map_err(|e| format!("{}: {e}", key("robot")))?;
             self.env
                 .resolve(&actor.robot)

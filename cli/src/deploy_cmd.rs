@@ -13,7 +13,7 @@ use l3p_net::open_session;
 use l3p_policy::{ExportConfig, cpu_device};
 use l3p_proto::OperatorAction;
 use l3p_registry::RegistryClient;
-use l3p_robots::catalog::RobotSpec as Robot;
+use l3p_robot::catalog::RobotSpec as Robot;
 
 use crate::runtime::{self, NetArgs};
 
@@ -195,7 +195,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
         })?
     };
     // Only checkpoints without an `io` get one here: they predate the clock and the filter.
-    let env_for = |obs_dim: usize| l3p_robots::io::env_for_policy(&config.env, obs_dim, None);
+    let env_for = |obs_dim: usize| l3p_task::io::env_for_policy(&config.env, obs_dim, None);
     let (export, export_config) = if l3p_policy::is_checkpoint(&bytes) {
         let mut ckpt = l3p_policy::checkpoint_from_bytes(&bytes, &cpu_device())?;
         let names: Vec<String> = ckpt.model.robots.iter().map(|r| r.name.clone()).collect();
@@ -212,7 +212,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
             .ok_or_else(|| anyhow::anyhow!("the checkpoint has no {name} (it has {names:?})"))?;
         let spec = &mut ckpt.model.robots[idx];
         if spec.io.is_none() {
-            spec.io = Some(l3p_robots::io::robot_io(
+            spec.io = Some(l3p_task::io::robot_io(
                 Robot::by_name(&name)?,
                 &env_for(spec.obs_dim),
             )?);
@@ -227,7 +227,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
             anyhow::bail!("{} is a policy for {}, not {r}", args.source, cfg.robot);
         }
         if cfg.io.is_none() {
-            cfg.io = Some(l3p_robots::io::robot_io(
+            cfg.io = Some(l3p_task::io::robot_io(
                 Robot::by_name(&cfg.robot)?,
                 &env_for(cfg.obs_dim),
             )?);
@@ -238,7 +238,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
     };
     let (export, export_config) = if args.symmetrized {
         let policy = l3p_policy::DeployPolicy::from_bytes(&export)?;
-        let robot = l3p_robots::catalog::RobotSpec::by_name(&policy.config.robot)?;
+        let robot = l3p_robot::catalog::RobotSpec::by_name(&policy.config.robot)?;
         let symmetric = crate::eval_cmd::symmetrized_policy(&policy, robot)?;
         (symmetric.to_bytes()?, symmetric.config)
     } else {

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::Context;
 use clap::Args;
 use l3p_policy::DeployPolicy;
-use l3p_robots::config::TerrainPreset;
+use l3p_task::config::TerrainPreset;
 
 use crate::config::Config;
 
@@ -124,7 +124,7 @@ pub struct PhysicsPins {
 
 impl PhysicsPins {
     /// Writes the pins into `[env.randomization]` overrides (and the physics step into `[env]`).
-    pub fn apply(&self, env: &mut l3p_robots::config::EnvConfig) -> anyhow::Result<()> {
+    pub fn apply(&self, env: &mut l3p_task::config::EnvConfig) -> anyhow::Result<()> {
         if let Some(dt) = self.physics_dt {
             env.set_physics_dt(dt)?;
         }
@@ -166,11 +166,11 @@ impl PhysicsPins {
 /// `--terrain-type` and `--level`: one terrain type in every column (on the curriculum preset's
 /// tiles when the preset is flat), every env at one level with the curriculum off.
 fn pin_terrain(
-    terrain: &mut l3p_robots::config::TerrainConfig,
+    terrain: &mut l3p_task::config::TerrainConfig,
     kind: Option<&str>,
     level: Option<usize>,
 ) -> anyhow::Result<()> {
-    use l3p_robots::terrain::{TerrainType, TypeProportions};
+    use l3p_task::terrain::{TerrainType, TypeProportions};
     if (kind.is_some() || level.is_some()) && terrain.preset == TerrainPreset::Flat {
         terrain.preset = TerrainPreset::Curriculum;
     }
@@ -260,13 +260,13 @@ pub struct EvalRow {
 }
 
 /// Sets a constant forward command: vx = v, vy = wz = 0, heading mode off, nobody standing.
-pub fn constant_forward_command(env: &mut l3p_robots::config::EnvConfig, v: f32) {
+pub fn constant_forward_command(env: &mut l3p_task::config::EnvConfig, v: f32) {
     constant_command(env, v, 0.0, 0.0);
 }
 
 /// Sets one constant command (the one every env starts with and resamples to): heading mode
 /// off, nobody standing.
-pub fn constant_command(env: &mut l3p_robots::config::EnvConfig, vx: f32, vy: f32, wz: f32) {
+pub fn constant_command(env: &mut l3p_task::config::EnvConfig, vx: f32, vy: f32, wz: f32) {
     env.commands.lin_vel_x = [vx, vx];
     env.commands.lin_vel_y = [vy, vy];
     env.commands.ang_vel_z = [wz, wz];
@@ -275,7 +275,7 @@ pub fn constant_command(env: &mut l3p_robots::config::EnvConfig, vx: f32, vy: f3
 }
 
 /// Every command in heading mode, holding the heading it starts with (yaw rate clipped at ±1).
-pub fn hold_heading(env: &mut l3p_robots::config::EnvConfig) {
+pub fn hold_heading(env: &mut l3p_task::config::EnvConfig) {
     env.commands.ang_vel_z = [-1.0, 1.0];
     env.commands.heading_command = true;
     env.commands.rel_heading_envs = 1.0;
@@ -287,8 +287,8 @@ pub fn hold_heading(env: &mut l3p_robots::config::EnvConfig) {
 /// unless `action_filter_alpha` overrides it.
 #[allow(clippy::too_many_arguments)]
 pub fn evaluate_row(
-    robot: &l3p_robots::catalog::RobotSpec,
-    env: &l3p_robots::config::EnvConfig,
+    robot: &l3p_robot::catalog::RobotSpec,
+    env: &l3p_task::config::EnvConfig,
     policy: &DeployPolicy,
     envs: usize,
     episodes: usize,
@@ -297,7 +297,7 @@ pub fn evaluate_row(
     action_filter_alpha: Option<f32>,
 ) -> anyhow::Result<EvalRow> {
     // The policy's own observation and action contract, whatever the config says.
-    let mut env = l3p_robots::io::sim_env_for_policy(env, &policy.config, robot.name);
+    let mut env = l3p_task::io::sim_env_for_policy(env, &policy.config, robot.name);
     if let Some(alpha) = action_filter_alpha {
         env.action_filter_alpha = alpha;
     }
@@ -305,7 +305,7 @@ pub fn evaluate_row(
     let max_steps = 1000 * (episodes / envs.max(1) + 2);
     let s = l3p_actor::evaluate(&mut sim, policy, episodes, max_steps)?;
     let walk_failures = match &s.gait {
-        Some(g) => l3p_robots::gait::WalkCriterion::default().failures(&s.tracking(), g),
+        Some(g) => l3p_task::gait::WalkCriterion::default().failures(&s.tracking(), g),
         None => vec!["no gait diagnostics".into()],
     };
     Ok(EvalRow {
@@ -319,12 +319,12 @@ pub fn evaluate_row(
 /// observation layout).
 pub(crate) fn mirror_policy(
     policy: &DeployPolicy,
-    robot: &l3p_robots::catalog::RobotSpec,
+    robot: &l3p_robot::catalog::RobotSpec,
 ) -> anyhow::Result<DeployPolicy> {
     let io = policy.config.io.as_ref();
     let gait_clock = io.is_some_and(|io| io.gait_clock_hz > 0.0);
-    let height_scan = policy.obs_dim() == l3p_robots::config::obs_dim_of(true, gait_clock);
-    let mirror = l3p_robots::mirror::TaskMirror::new(
+    let height_scan = policy.obs_dim() == l3p_task::config::obs_dim_of(true, gait_clock);
+    let mirror = l3p_task::mirror::TaskMirror::new(
         &robot.model()?,
         &robot.joint_names,
         &robot.default_pose,
@@ -343,7 +343,7 @@ pub(crate) fn mirror_policy(
 /// `policy` averaged with its left-right mirror image on `robot`: exactly symmetric.
 pub(crate) fn symmetrized_policy(
     policy: &DeployPolicy,
-    robot: &l3p_robots::catalog::RobotSpec,
+    robot: &l3p_robot::catalog::RobotSpec,
 ) -> anyhow::Result<DeployPolicy> {
     Ok(policy.averaged(&mirror_policy(policy, robot)?)?)
 }
@@ -363,7 +363,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     )?;
     // A blind policy runs without the height scan (evaluate_row applies the whole contract).
     config.env =
-        l3p_robots::io::env_for_policy(&config.env, policy.obs_dim(), policy.config.io.as_ref());
+        l3p_task::io::env_for_policy(&config.env, policy.obs_dim(), policy.config.io.as_ref());
     if let Some(range) = &args.lin_vel_x {
         if range.len() != 2 || range[0] > range[1] {
             anyhow::bail!("--lin-vel-x takes MIN,MAX with MIN <= MAX, got {range:?}");
@@ -375,7 +375,7 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
     if let Some(phase) = args.clock_start {
         config.env.gait_clock_start = phase;
     }
-    let robot = l3p_robots::catalog::RobotSpec::by_name(&args.robot)?;
+    let robot = l3p_robot::catalog::RobotSpec::by_name(&args.robot)?;
     let policy = if args.mirrored {
         mirror_policy(&policy, robot)?
     } else if args.symmetrized {
@@ -456,7 +456,7 @@ pub fn format_rows(rows: &[EvalRow]) -> String {
             .map(|r| format!("{:>16}", f(r)))
             .collect::<String>()
     };
-    let gait = |r: &EvalRow, f: &dyn Fn(&l3p_robots::gait::GaitReport) -> String| {
+    let gait = |r: &EvalRow, f: &dyn Fn(&l3p_task::gait::GaitReport) -> String| {
         r.summary.gait.as_ref().map(f).unwrap_or_else(|| "-".into())
     };
     let lines: Vec<(&str, String)> = vec![

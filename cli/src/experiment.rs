@@ -18,8 +18,8 @@ use std::path::{Path, PathBuf};
 
 use l3p_learner::report::ReportRow;
 use l3p_learner::{Mode, TransferHeads};
-use l3p_robots::config::TerrainPreset;
-use l3p_robots::terrain::TerrainType;
+use l3p_task::config::TerrainPreset;
+use l3p_task::terrain::TerrainType;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{ActorSpec, Config};
@@ -234,7 +234,7 @@ impl ExperimentSpec {
                 return Err(format!("{stage}.iterations = 0: expected >= 1"));
             }
             for r in &s.robots {
-                l3p_robots::catalog::RobotSpec::by_name(r)
+                l3p_robot::catalog::RobotSpec::by_name(r)
                     .map_err(|x| format!("{stage}.robots: {x}"))?;
             }
         }
@@ -285,7 +285,7 @@ impl ExperimentSpec {
     fn validate_variant(&self, v: &VariantSpec) -> Result<(), String> {
         l3p_proto::keys::validate_segment("name", &v.name).map_err(|x| x.to_string())?;
         for r in v.robots.iter().chain(&v.pretrain_robots).flatten() {
-            l3p_robots::catalog::RobotSpec::by_name(r).map_err(|x| x.to_string())?;
+            l3p_robot::catalog::RobotSpec::by_name(r).map_err(|x| x.to_string())?;
         }
         if v.pretrain_robots.as_ref().is_some_and(|r| r.is_empty()) {
             return Err("pretrain_robots is empty".into());
@@ -450,10 +450,10 @@ pub fn plan(spec: &ExperimentSpec, base: &Config) -> anyhow::Result<Vec<Arm>> {
         if let Some(t) = r.terrain
             && t != base.env.terrain.preset
         {
-            config.env.terrain = l3p_robots::config::TerrainConfig {
+            config.env.terrain = l3p_task::config::TerrainConfig {
                 fix_internal_edges: base.env.terrain.fix_internal_edges,
                 vertical_faces: base.env.terrain.vertical_faces,
-                ..l3p_robots::config::TerrainConfig::with_preset(t)
+                ..l3p_task::config::TerrainConfig::with_preset(t)
             };
             config.env.height_scan = t != TerrainPreset::Flat;
         }
@@ -666,7 +666,7 @@ pub struct WalkOutcome {
     pub rows: Vec<crate::eval_cmd::EvalRow>,
 }
 
-/// How the walk criterion's heading bound words its failure (`l3p_robots::gait::WalkCriterion`).
+/// How the walk criterion's heading bound words its failure (`l3p_task::gait::WalkCriterion`).
 const HEADING_FAILURE: &str = "heading changes";
 
 /// Whether every failing bound (none included) is the heading bound: a gait that tracks, stands
@@ -675,7 +675,7 @@ pub fn only_heading_fails<'a>(mut failures: impl Iterator<Item = &'a str>) -> bo
     failures.all(|f| f.starts_with(HEADING_FAILURE))
 }
 
-/// How the walk criterion words an xy tracking failure (`l3p_robots::gait::WalkCriterion`).
+/// How the walk criterion words an xy tracking failure (`l3p_task::gait::WalkCriterion`).
 const TRACKING_FAILURE: &str = "xy tracking error";
 
 /// Whether no failing bound is the xy tracking bound: the policy goes where it is told.
@@ -1055,15 +1055,15 @@ pub fn markdown_table(results: &[ArmResult]) -> String {
 /// `env` on one terrain type alone, difficulty levels and curriculum on: the curriculum preset's
 /// ranges (the paper's if the arm trained on them), every column of type `t`.
 pub fn single_terrain_env(
-    env: &l3p_robots::config::EnvConfig,
+    env: &l3p_task::config::EnvConfig,
     t: TerrainType,
-) -> l3p_robots::config::EnvConfig {
+) -> l3p_task::config::EnvConfig {
     let mut env = env.clone();
     let terrain = &mut env.terrain;
     if !matches!(terrain.preset, TerrainPreset::Paper) {
         terrain.preset = TerrainPreset::Curriculum;
     }
-    terrain.proportions = Some(l3p_robots::terrain::TypeProportions::only(t));
+    terrain.proportions = Some(l3p_task::terrain::TypeProportions::only(t));
     terrain.curriculum = Some(true);
     env
 }

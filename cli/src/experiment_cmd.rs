@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use clap::{Args, Subcommand};
 use l3p_learner::report::{ReportRow, load_learner_records, series, smooth};
 use l3p_proto::MetricsRecord;
-use l3p_robots::config::TerrainPreset;
+use l3p_task::config::TerrainPreset;
 
 use crate::config::Config;
 use crate::experiment::{
@@ -667,7 +667,7 @@ fn evaluate_terrains(
 struct Player<'a> {
     spec: &'a ExperimentSpec,
     policy: l3p_policy::DeployPolicy,
-    robot: &'static l3p_robots::catalog::RobotSpec,
+    robot: &'static l3p_robot::catalog::RobotSpec,
 }
 
 impl<'a> Player<'a> {
@@ -682,13 +682,13 @@ impl<'a> Player<'a> {
         Ok(Self {
             spec,
             policy: l3p_policy::DeployPolicy::from_bytes(&bytes)?,
-            robot: l3p_robots::catalog::RobotSpec::by_name(robot)?,
+            robot: l3p_robot::catalog::RobotSpec::by_name(robot)?,
         })
     }
 
     fn play(
         &self,
-        env: &l3p_robots::config::EnvConfig,
+        env: &l3p_task::config::EnvConfig,
         episodes: usize,
         forward: Option<f32>,
     ) -> anyhow::Result<crate::eval_cmd::EvalRow> {

@@ -19,12 +19,12 @@ use std::time::{Duration, Instant};
 
 use l3p_policy::DeployPolicy;
 use l3p_policy::infer::InferScratch;
-use l3p_robots::catalog::{NUM_JOINTS, RobotSpec};
-use l3p_robots::config::COMMAND_OBS;
-use l3p_robots::gait::GaitReport;
-use l3p_robots::model::{ShapeSpec, pose_arrays};
-use l3p_robots::task::{Command, NUM_FEET, yaw_of};
-use l3p_robots::vecenv::VecEnv;
+use l3p_robot::catalog::{NUM_JOINTS, RobotSpec};
+use l3p_robot::model::{ShapeSpec, pose_arrays};
+use l3p_sim::vecenv::VecEnv;
+use l3p_task::config::COMMAND_OBS;
+use l3p_task::gait::GaitReport;
+use l3p_task::task::{Command, NUM_FEET, yaw_of};
 use rerun::{
     Arrows3D, Boxes3D, Capsules3D, Color, Cylinders3D, Ellipsoids3D, Mesh3D, RecordingStream,
     Scalars, TextDocument, TextLog, Transform3D,
@@ -111,7 +111,7 @@ pub fn play(args: &PlayArgs) -> anyhow::Result<()> {
 
 /// One single-env player per scene entry, spawned facing +x, side by side along y.
 fn build_players(
-    env: &l3p_robots::config::EnvConfig,
+    env: &l3p_task::config::EnvConfig,
     entries: Vec<(SceneEntry, DeployPolicy)>,
     first: VelocityCommand,
     seed: u64,
@@ -119,7 +119,7 @@ fn build_players(
     let mut players = Vec::with_capacity(entries.len());
     for (k, (entry, policy)) in entries.into_iter().enumerate() {
         let spec = RobotSpec::by_name(&entry.robot)?;
-        let mut env_cfg = l3p_robots::io::sim_env_for_policy(env, &policy.config, spec.name);
+        let mut env_cfg = l3p_task::io::sim_env_for_policy(env, &policy.config, spec.name);
         crate::eval_cmd::constant_command(&mut env_cfg, first.vx, first.vy, first.wz);
         let mut env = VecEnv::new(spec, &env_cfg, 1, 1, seed)?;
         if env.obs_dim() != policy.obs_dim() || env.action_dim() != policy.action_dim() {
@@ -293,7 +293,7 @@ fn unique_body_names<'a>(names: impl Iterator<Item = &'a str>) -> Vec<String> {
 }
 
 /// A rapier pose as a Rerun transform.
-fn transform(pose: &l3p_robots::model::Pose) -> Transform3D {
+fn transform(pose: &l3p_robot::model::Pose) -> Transform3D {
     let (t, q) = pose_arrays(pose);
     Transform3D::from_translation_rotation(t, rerun::Quaternion::from_xyzw(q))
 }
@@ -362,7 +362,7 @@ fn log_robot_static(rec: &RecordingStream, p: &Player) -> anyhow::Result<()> {
                 ShapeSpec::ConvexHull { ref points } => {
                     // The loader only keeps points with volume; should they make no hull, the
                     // points themselves are drawn.
-                    match l3p_robots::sim::convex_hull_mesh(points) {
+                    match l3p_sim::world::convex_hull_mesh(points) {
                         Some((vertices, triangles)) => rec.log_static(
                             path.as_str(),
                             &Mesh3D::new(vertices.iter().map(|v| [v.x, v.y, v.z]))
@@ -691,7 +691,7 @@ impl TrainStream {
     /// one's entities.
     pub fn log_rollout(
         &self,
-        env: &l3p_robots::config::EnvConfig,
+        env: &l3p_task::config::EnvConfig,
         robot: &str,
         policy: DeployPolicy,
         iteration: u64,

@@ -154,7 +154,7 @@ fn terrain_level_by_type(
 ) -> Vec<(String, Vec<(f64, f64, f64, f64)>)> {
     let mut lines = Vec::new();
     for (run, records) in runs {
-        for (k, kind) in l3p_robots::terrain::TerrainType::ALL.iter().enumerate() {
+        for (k, kind) in l3p_task::terrain::TerrainType::ALL.iter().enumerate() {
             let raw = series(records, &format!("terrain_level/type{k}"));
             if raw.is_empty() {
                 continue;

@@ -1,17 +1,17 @@
 //! `l3p robots list|check|add`: the robots (the catalog and those added from a user's URDF), a
 //! load-and-stand check of a robot or URDF file, and `add`, which makes a quadruped URDF a robot
 //! (`<data-dir>/robots/<name>.toml` + the URDF beside it). Glue only; the work is in
-//! `l3p_robots::{catalog, added, urdf, bench}`.
+//! `l3p_robot::{catalog, added, urdf}` and `l3p_sim::{describe, bench}`.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use clap::{Args, Subcommand};
-use l3p_robots::actuator::Actuator;
-use l3p_robots::bench::stand_check;
-use l3p_robots::catalog::{NUM_JOINTS, RobotSpec};
-use l3p_robots::model::RobotModel;
-use l3p_robots::sim::RobotBinding;
+use l3p_robot::catalog::{NUM_JOINTS, RobotSpec};
+use l3p_robot::model::RobotModel;
+use l3p_sim::actuator::Actuator;
+use l3p_sim::bench::stand_check;
+use l3p_sim::world::RobotBinding;
 
 /// `l3p robots ...`
 #[derive(Debug, Args)]
@@ -114,14 +114,15 @@ pub fn run(args: RobotsArgs) -> anyhow::Result<()> {
 /// `./l3p-data/robots`). A broken description is reported and skipped: it must not stop commands
 /// that do not use it (using it then fails with "unknown robot" naming the known ones).
 pub fn load_added_robots(data_dir: Option<&Path>) {
-    l3p_robots::added::load_added_robots(data_dir);
+    l3p_robot::added::load_added_robots(data_dir);
 }
 
 fn add(args: &AddArgs) -> anyhow::Result<()> {
-    use l3p_robots::added::{Overrides, describe};
+    use l3p_robot::added::Overrides;
+    use l3p_sim::describe::describe;
     // The hulls of the meshes found beside the file go into the description: the robot it
     // registers, here and on other machines, has the colliders the standing check uses.
-    let (model, mesh_hulls) = l3p_robots::urdf::load_urdf_file_with_hulls(&args.urdf)?;
+    let (model, mesh_hulls) = l3p_robot::urdf::load_urdf_file_with_hulls(&args.urdf)?;
     let overrides = Overrides {
         name: args.name.clone(),
         kp: args.kp,
@@ -133,7 +134,7 @@ fn add(args: &AddArgs) -> anyhow::Result<()> {
     let name = overrides
         .name
         .clone()
-        .unwrap_or_else(|| l3p_robots::added::sanitize_name(&model.name));
+        .unwrap_or_else(|| l3p_robot::added::sanitize_name(&model.name));
     let dir = args.data_dir.join("robots");
     let toml_path = dir.join(format!("{name}.toml"));
     if toml_path.exists() && !args.replace {
@@ -180,7 +181,7 @@ fn add(args: &AddArgs) -> anyhow::Result<()> {
         inferred.standing_height,
         inferred.settled_height,
         100.0 * inferred.settled_height / inferred.standing_height.max(1e-6),
-        l3p_robots::added::STAND_CHECK_SECONDS,
+        l3p_robot::added::STAND_CHECK_SECONDS,
         inferred.settled_gravity_z,
         100.0 * inferred.foot_share,
         inferred.carriers
@@ -276,7 +277,7 @@ pub fn install_robot_artifact(
     let plain = |f: &str| {
         !f.is_empty() && Path::new(f).file_name().is_some_and(|n| n == f) && !f.starts_with('.')
     };
-    if !plain(&bundle.urdf_file) || l3p_robots::added::sanitize_name(&bundle.name) != bundle.name {
+    if !plain(&bundle.urdf_file) || l3p_robot::added::sanitize_name(&bundle.name) != bundle.name {
         anyhow::bail!(
             "robot artifact names files `{}` / `{}`: expected plain file names",
             bundle.name,
@@ -296,8 +297,8 @@ pub fn install_robot_artifact(
     let toml_path = dir.join(format!("{}.toml", bundle.name));
     l3p_policy::write_atomic(&dir.join(&bundle.urdf_file), bundle.urdf.as_bytes())?;
     l3p_policy::write_atomic(&toml_path, bundle.toml.as_bytes())?;
-    let (desc, urdf) = l3p_robots::added::RobotDescription::load(&toml_path)?;
-    Ok(l3p_robots::added::register(&desc, urdf)?)
+    let (desc, urdf) = l3p_robot::added::RobotDescription::load(&toml_path)?;
+    Ok(l3p_robot::added::register(&desc, urdf)?)
 }
 
 fn list() -> anyhow::Result<()> {
@@ -305,7 +306,7 @@ fn list() -> anyhow::Result<()> {
         "{:<9} {:<22} {:>8} {:>9} {:>6} {:>12} {:>14} {:>8}",
         "name", "robot", "mass kg", "stand m", "scale", "train kp/kd", "effort N·m", "vel r/s"
     );
-    let added = l3p_robots::added::all_added();
+    let added = l3p_robot::added::all_added();
     for s in RobotSpec::all().iter().chain(added.iter().copied()) {
         let m = s
             .model()
@@ -371,7 +372,7 @@ fn match_spec(model: &RobotModel) -> Option<(&'static RobotSpec, RobotBinding)> 
 fn check(robot: &str, seconds: f32, training_gains: bool) -> anyhow::Result<()> {
     let is_path = robot.ends_with(".urdf") || Path::new(robot).exists();
     let (model, matched) = if is_path {
-        let m = l3p_robots::urdf::load_urdf_file(robot)?;
+        let m = l3p_robot::urdf::load_urdf_file(robot)?;
         let matched = match_spec(&m);
         (m, matched)
     } else {
@@ -406,7 +407,7 @@ fn check(robot: &str, seconds: f32, training_gains: bool) -> anyhow::Result<()> 
         println!("note: {w}");
     }
     // The leg structure as `l3p robots add` will infer it: from geometry, whatever the names.
-    match l3p_robots::infer::infer_quadruped(&model) {
+    match l3p_robot::legs::infer_quadruped(&model) {
         Ok(legs) => print!(
             "inferred legs (canonical order FL, FR, RL, RR):\n{}",
             legs.summary()

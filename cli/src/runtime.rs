@@ -12,7 +12,7 @@ pub use l3p_deploy_bin::process::{
     tokio_runtime,
 };
 use l3p_net::ZenohSettings;
-use l3p_robots::catalog::RobotSpec as Robot;
+use l3p_robot::catalog::RobotSpec as Robot;
 
 use crate::config::Config;
 
@@ -57,7 +57,7 @@ pub fn obs_dim(config: &Config) -> usize {
 /// Left-right mirror maps of `robot`'s task under this config (for `[ppo] symmetry_coef`).
 pub fn mirror(config: &Config, robot: &Robot) -> anyhow::Result<l3p_learner::Mirror> {
     let model = robot.model()?;
-    let m = l3p_robots::mirror::TaskMirror::new(
+    let m = l3p_task::mirror::TaskMirror::new(
         &model,
         &robot.joint_names,
         &robot.default_pose,
@@ -101,7 +101,7 @@ pub fn transfer_maps(
     robots
         .iter()
         .map(|r| {
-            let m = l3p_robots::morphology::TransferMap::new(
+            let m = l3p_task::morphology::TransferMap::new(
                 prototype,
                 r,
                 config.env.height_scan,
@@ -113,7 +113,7 @@ pub fn transfer_maps(
                 l3p_policy::HeadMap {
                     obs_dim: m.obs_dim,
                     observation: m.observation,
-                    action_dim: l3p_robots::catalog::NUM_JOINTS,
+                    action_dim: l3p_robot::catalog::NUM_JOINTS,
                     action: m.action,
                     action_inverse: m.action_inverse,
                 },
@@ -128,9 +128,9 @@ pub fn policy_robot(config: &Config, robot: &Robot) -> anyhow::Result<l3p_policy
     Ok(l3p_policy::PolicyRobot {
         name: robot.name.to_string(),
         obs_dim: obs_dim(config),
-        action_dim: l3p_robots::catalog::NUM_JOINTS,
+        action_dim: l3p_robot::catalog::NUM_JOINTS,
         action_scale: robot.action_scale,
-        io: Some(l3p_robots::io::robot_io(robot, &config.env)?),
+        io: Some(l3p_task::io::robot_io(robot, &config.env)?),
     })
 }
 

@@ -257,7 +257,7 @@ impl Workspace {
                 .canonicalize()
                 .with_context(|| format!("the model {}", m.display()))?,
             None => {
-                let robot = l3p_robots::catalog::RobotSpec::by_name(&policy.config.robot)?;
+                let robot = l3p_robot::catalog::RobotSpec::by_name(&policy.config.robot)?;
                 let path = dir.path().join(format!("{}.urdf", robot.name));
                 std::fs::write(&path, robot.urdf)?;
                 path

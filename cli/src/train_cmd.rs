@@ -105,7 +105,7 @@ impl TrainStream {
     }
     fn log_rollout(
         &self,
-        _env: &l3p_robots::config::EnvConfig,
+        _env: &l3p_task::config::EnvConfig,
         _robot: &str,
         _policy: l3p_policy::DeployPolicy,
         _iteration: u64,
@@ -181,7 +181,7 @@ fn walk_check_in_two_simulators(
 fn check_in_two_simulators(
     config: &Config,
     iteration: u64,
-    robot: &'static l3p_robots::catalog::RobotSpec,
+    robot: &'static l3p_robot::catalog::RobotSpec,
     bytes: Vec<u8>,
 ) -> anyhow::Result<WalkCheck> {
     let policy = l3p_policy::DeployPolicy::from_bytes(&bytes)?;
@@ -215,7 +215,7 @@ fn starts_from_pretrained(config: &Config) -> bool {
 /// any training; as the actors play it ([`deployable`] gives the one walk checks judge).
 pub fn start_export(
     config: &Config,
-) -> anyhow::Result<(&'static l3p_robots::catalog::RobotSpec, Vec<u8>)> {
+) -> anyhow::Result<(&'static l3p_robot::catalog::RobotSpec, Vec<u8>)> {
     anyhow::ensure!(
         starts_from_pretrained(config),
         "run {} does not start from a pretrained policy",
@@ -284,9 +284,9 @@ pub fn walk_check_export(
 fn check_policy(
     iteration: u64,
     export: Vec<u8>,
-    robot: &'static l3p_robots::catalog::RobotSpec,
+    robot: &'static l3p_robot::catalog::RobotSpec,
     policy: &l3p_policy::DeployPolicy,
-    mut env: l3p_robots::config::EnvConfig,
+    mut env: l3p_task::config::EnvConfig,
 ) -> anyhow::Result<WalkCheck> {
     env.set_physics_dt(WALK_CHECK_PHYSICS_DT)?;
     let mut rows = Vec::new();
@@ -329,9 +329,9 @@ fn walk_setup(
     run_dir: &std::path::Path,
 ) -> anyhow::Result<(
     u64,
-    &'static l3p_robots::catalog::RobotSpec,
+    &'static l3p_robot::catalog::RobotSpec,
     l3p_policy::DeployPolicy,
-    l3p_robots::config::EnvConfig,
+    l3p_task::config::EnvConfig,
 )> {
     let (iteration, robot, policy) = latest_policy(config, run_dir)?;
     Ok((iteration, robot, policy, walk_env(config, robot)?))
@@ -341,8 +341,8 @@ fn walk_setup(
 /// range, pushes off, the rest of the training randomisation on.
 fn walk_env(
     config: &Config,
-    robot: &l3p_robots::catalog::RobotSpec,
-) -> anyhow::Result<l3p_robots::config::EnvConfig> {
+    robot: &l3p_robot::catalog::RobotSpec,
+) -> anyhow::Result<l3p_task::config::EnvConfig> {
     let mut env = config.env.clone();
     let top_damping = env.randomization(robot.name).joint_damping[1];
     crate::eval_cmd::PhysicsPins {
@@ -359,7 +359,7 @@ fn latest_policy(
     run_dir: &std::path::Path,
 ) -> anyhow::Result<(
     u64,
-    &'static l3p_robots::catalog::RobotSpec,
+    &'static l3p_robot::catalog::RobotSpec,
     l3p_policy::DeployPolicy,
 )> {
     let (iteration, robot, bytes) = latest_export(config, run_dir)?;
@@ -371,20 +371,20 @@ fn latest_policy(
 }
 
 /// The config's first actor's robot (the one walk checks play).
-fn first_robot(config: &Config) -> anyhow::Result<&'static l3p_robots::catalog::RobotSpec> {
+fn first_robot(config: &Config) -> anyhow::Result<&'static l3p_robot::catalog::RobotSpec> {
     let name = config
         .actors
         .first()
         .map(|a| a.robot.as_str())
         .ok_or_else(|| anyhow::anyhow!("no [[actors]] in the config"))?;
-    Ok(l3p_robots::catalog::RobotSpec::by_name(name)?)
+    Ok(l3p_robot::catalog::RobotSpec::by_name(name)?)
 }
 
 /// The latest checkpoint's iteration, its first actor's robot and its export's bytes for it.
 fn latest_export(
     config: &Config,
     run_dir: &std::path::Path,
-) -> anyhow::Result<(u64, &'static l3p_robots::catalog::RobotSpec, Vec<u8>)> {
+) -> anyhow::Result<(u64, &'static l3p_robot::catalog::RobotSpec, Vec<u8>)> {
     let ckpt =
         l3p_policy::load_checkpoint(&daemon::checkpoint_path(run_dir), &l3p_policy::cpu_device())?;
     let robot = first_robot(config)?;
@@ -396,7 +396,7 @@ fn latest_export(
 /// `[ppo] symmetrize_export` is set.
 fn deployable(
     config: &Config,
-    robot: &l3p_robots::catalog::RobotSpec,
+    robot: &l3p_robot::catalog::RobotSpec,
     export: Vec<u8>,
 ) -> anyhow::Result<Vec<u8>> {
     if !config.ppo.symmetrize_export {
@@ -902,7 +902,7 @@ mod tests {
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
             .join("../docs/a1-flat-session27/policy");
         let trained = std::fs::read(dir.join("policy.safetensors")).unwrap();
-        let robot = l3p_robots::catalog::RobotSpec::by_name("a1").unwrap();
+        let robot = l3p_robot::catalog::RobotSpec::by_name("a1").unwrap();
         let mut config = Config::default();
         assert_eq!(
             deployable(&config, robot, trained.clone()).unwrap(),

@@ -53,7 +53,7 @@ pub fn run(args: TransferArgs) -> anyhow::Result<()> {
         config.run.data_dir = dir.clone();
         crate::robots_cmd::load_added_robots(Some(dir));
     }
-    let robot = l3p_robots::catalog::RobotSpec::by_name(&args.robot)?;
+    let robot = l3p_robot::catalog::RobotSpec::by_name(&args.robot)?;
     let run = args
         .run
         .clone()

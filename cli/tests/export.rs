@@ -172,9 +172,9 @@ fn a_symmetrized_export_is_the_mean_of_the_policy_and_its_mirror() {
         2 * original.config.layers[0].output
     );
     // Its own mirror image is itself: exactly symmetric.
-    let robot = l3p_robots::catalog::RobotSpec::by_name("a1").unwrap();
+    let robot = l3p_robot::catalog::RobotSpec::by_name("a1").unwrap();
     let clock = original.config.io.as_ref().unwrap().gait_clock_hz > 0.0;
-    let mirror = l3p_robots::mirror::TaskMirror::new(
+    let mirror = l3p_task::mirror::TaskMirror::new(
         &robot.model().unwrap(),
         &robot.joint_names,
         &robot.default_pose,

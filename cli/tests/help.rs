@@ -99,7 +99,7 @@ fn closed_stdout_is_not_a_panic() {
 #[test]
 fn an_error_prints_its_chain_and_a_backtrace_only_when_asked() {
     let dir = tempfile::tempdir().unwrap();
-    let urdf = l3p_robots::catalog::RobotSpec::by_name("a1")
+    let urdf = l3p_robot::catalog::RobotSpec::by_name("a1")
         .unwrap()
         .urdf
         .split(" effort=\"")

@@ -33,7 +33,7 @@ fn an_added_urdf_is_listed_checked_and_trainable_by_name() {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     // A1's own URDF under a user's name.
-    let urdf = l3p_robots::catalog::RobotSpec::by_name("a1")
+    let urdf = l3p_robot::catalog::RobotSpec::by_name("a1")
         .unwrap()
         .urdf
         .replacen("name=\"a1\"", "name=\"Lab Dog\"", 1);
@@ -97,7 +97,7 @@ fn an_added_urdf_is_listed_checked_and_trainable_by_name() {
 fn transfer_fine_tunes_a_registry_checkpoint_on_an_added_robot_with_lineage() {
     let dir = tempfile::tempdir().unwrap();
     let cwd = dir.path();
-    let urdf = l3p_robots::catalog::RobotSpec::by_name("go1")
+    let urdf = l3p_robot::catalog::RobotSpec::by_name("go1")
         .unwrap()
         .urdf
         .replacen("name=\"go1\"", "name=\"field_dog\"", 1);
@@ -177,7 +177,7 @@ fn an_actor_elsewhere_fetches_an_added_robot_from_the_registry() {
     let far = dir.path().join("far");
     std::fs::create_dir_all(&home).unwrap();
     std::fs::create_dir_all(&far).unwrap();
-    let urdf = l3p_robots::catalog::RobotSpec::by_name("a1")
+    let urdf = l3p_robot::catalog::RobotSpec::by_name("a1")
         .unwrap()
         .urdf
         .replacen("name=\"a1\"", "name=\"Yard Dog\"", 1);
@@ -307,7 +307,7 @@ fn an_added_robots_mesh_hulls_travel_in_its_description_and_registry_artifact() 
     let dir = tempfile::tempdir().unwrap();
     let home = dir.path().join("home");
     let capsule = r#"<geometry><capsule radius="0.012" length="0.176"/></geometry>"#;
-    let urdf = l3p_robots::catalog::RobotSpec::by_name("a1")
+    let urdf = l3p_robot::catalog::RobotSpec::by_name("a1")
         .unwrap()
         .urdf
         .replacen("name=\"a1\"", "name=\"Hull Dog\"", 1)
@@ -365,7 +365,7 @@ fn an_added_robots_mesh_hulls_travel_in_its_description_and_registry_artifact() 
         .flat_map(|b| &b.colliders)
         .filter(|c| c.link.ends_with("_calf"))
         .filter(|c| {
-            matches!(&c.shape, l3p_robots::model::ShapeSpec::ConvexHull { points } if points.len() == 8)
+            matches!(&c.shape, l3p_robot::model::ShapeSpec::ConvexHull { points } if points.len() == 8)
         })
         .count();
     assert_eq!(calf_hulls, 4, "{:#?}", model.warnings);
@@ -380,7 +380,7 @@ fn an_added_robots_mesh_hulls_travel_in_its_description_and_registry_artifact() 
 fn a_policy_trained_for_an_added_robot_deploys_to_its_simulated_robot() {
     let dir = tempfile::tempdir().unwrap();
     let cwd = dir.path();
-    let urdf = l3p_robots::catalog::RobotSpec::by_name("a1")
+    let urdf = l3p_robot::catalog::RobotSpec::by_name("a1")
         .unwrap()
         .urdf
         .replacen("name=\"a1\"", "name=\"Porch Dog\"", 1);
@@ -498,7 +498,7 @@ fn a_policy_trained_for_an_added_robot_deploys_to_its_simulated_robot() {
     assert_eq!(summary["robot"], "porch_dog");
     // The simulated robot is the added description (its inferred pose stands at 0.290 m), not
     // the catalog A1 whose URDF it came from (0.302 m).
-    let a1 = l3p_robots::catalog::RobotSpec::by_name("a1")
+    let a1 = l3p_robot::catalog::RobotSpec::by_name("a1")
         .unwrap()
         .nominal_standing_height()
         .unwrap() as f64;

@@ -10,7 +10,7 @@ use l3p_deploy::{DeployOptions, SafetyConfig};
 use l3p_net::{Exposure, ZenohSettings, open_session};
 use l3p_proto::keys;
 use l3p_registry_client::RegistryClient;
-use l3p_robots::catalog::RobotSpec as Robot;
+use l3p_robot::catalog::RobotSpec as Robot;
 use serde::Deserialize;
 use serde::de::IgnoredAny;
 
@@ -160,7 +160,7 @@ impl DeployFile {
     /// `l3p` does for every config it loads), and validate its `[deploy]` settings.
     pub fn load(path: &Path) -> Result<Self, l3p_proto::config::ConfigError> {
         let file: DeployFile = l3p_proto::config::load_toml(path)?;
-        l3p_robots::added::load_added_robots(Some(&file.run.data_dir));
+        l3p_robot::added::load_added_robots(Some(&file.run.data_dir));
         file.deploy
             .validate()
             .map_err(|message| l3p_proto::config::ConfigError::Invalid {

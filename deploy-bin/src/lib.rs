@@ -11,7 +11,7 @@
 //! Architecture invariant: what this crate links is what the robot computer runs — no rapier, burn,
 //! SQLite, Rerun, `l3p-policy`, `l3p-learner`, `l3p-actor` or `l3p-registry` (checked by
 //! `tests/tests/tidy.rs`). A policy runs through `l3p-infer` (inside `l3p-deploy`), the robot is
-//! known through `l3p-robots` without its `sim` feature, the registry through its Zenoh client.
+//! known through `l3p-robot` (no simulator), the registry through its Zenoh client.
 
 pub mod command;
 pub mod process;

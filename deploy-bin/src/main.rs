@@ -11,7 +11,7 @@ fn main() -> ExitCode {
     process::init_logging();
     let cli = Cli::parse();
     // Robots added with `l3p robots add` ($L3P_ROBOTS_DIR, else ./l3p-data/robots), as `l3p` does.
-    l3p_robots::added::load_added_robots(None);
+    l3p_robot::added::load_added_robots(None);
     let verbose = cli.verbose || process::lib_backtrace_asked();
     if cli.verbose {
         // SAFETY: nothing has started another thread yet (logging set-up starts none), so no

@@ -10,7 +10,7 @@ use std::time::{Duration, Instant};
 
 use l3p_net::{ZenohSettings, free_loopback_port, open_session};
 use l3p_proto::{ControlMode, DeployStatus, RobotCommand, codec, keys};
-use l3p_robots::catalog::RobotSpec;
+use l3p_robot::catalog::RobotSpec;
 
 fn trained_policy() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR"))
@@ -166,7 +166,7 @@ fn the_lean_binary_knows_robots_added_under_the_configs_data_dir() {
     let urdf = a1.urdf.replacen("name=\"a1\"", "name=\"lean_quad\"", 1);
     std::fs::write(robots.join("lean_quad.urdf"), urdf).unwrap();
     let strings = |s: &[&str]| s.iter().map(|x| x.to_string()).collect::<Vec<_>>();
-    let description = l3p_robots::added::RobotDescription {
+    let description = l3p_robot::added::RobotDescription {
         name: "lean_quad".into(),
         display_name: "A1 under another name".into(),
         urdf: "lean_quad.urdf".into(),

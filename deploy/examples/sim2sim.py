@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Play an l3p policy export in MuJoCo and report gait diagnostics (the Python half of `l3p sim2sim`).
 
-    python3 sim2sim.py <export dir> --model robots/assets/a1.urdf --forward 0.5,1.0 \\
+    python3 sim2sim.py <export dir> --model robot/assets/a1.urdf --forward 0.5,1.0 \\
         [--seconds 20] [--seeds 3] [--json out.json | --json -] [--require-pass]
 
 A second simulator, an independently made robot model and a controller written from the export's
@@ -536,7 +536,7 @@ class Controller:
 
 
 class Meter:
-    """Per-episode sums over control steps (the measures of robots/src/gait.rs)."""
+    """Per-episode sums over control steps (the measures of task/src/gait.rs)."""
 
     def __init__(self, robot, standing, dt):
         self.robot, self.standing, self.dt = robot, standing, dt

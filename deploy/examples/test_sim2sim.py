@@ -25,7 +25,7 @@ sys.path.insert(0, str(HERE))
 import sim2sim  # noqa: E402
 
 EXPORT = ROOT / "docs/a1-flat-session31/policy"
-A1_URDF = ROOT / "robots/assets/a1.urdf"
+A1_URDF = ROOT / "robot/assets/a1.urdf"
 
 
 def run(*argv):
@@ -260,7 +260,7 @@ def quat_mul(a, b):
 
 
 def rotate_inverse(q, v):
-    """robots/src/task/frames.rs `quat_rotate_inverse`, transcribed: R(q)ᵀ v."""
+    """task/src/task/frames.rs `quat_rotate_inverse`, transcribed: R(q)ᵀ v."""
     w, x, y, z = q[0], -q[1], -q[2], -q[3]
     t = [2 * (y * v[2] - z * v[1]), 2 * (z * v[0] - x * v[2]), 2 * (x * v[1] - y * v[0])]
     return np.array([v[0] + w * t[0] + (y * t[2] - z * t[1]),

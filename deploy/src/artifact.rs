@@ -8,9 +8,9 @@ use std::path::Path;
 use l3p_infer::{DeployPolicy, RobotIo};
 use l3p_proto::registry::{ArtifactKind, ArtifactMeta};
 use l3p_registry_client::RegistryClient;
-use l3p_robots::catalog::RobotSpec;
-use l3p_robots::config::EnvConfig;
-use l3p_robots::io::{env_for_policy, robot_io};
+use l3p_robot::catalog::RobotSpec;
+use l3p_task::config::EnvConfig;
+use l3p_task::io::{env_for_policy, robot_io};
 
 use crate::DeployError;
 use crate::io::{ObservationBuilder, standing_state};

@@ -15,7 +15,7 @@
 
 use l3p_infer::RobotIo;
 use l3p_proto::{ControlMode, OperatorAction, RobotCommand, RobotState, WIRE_VERSION};
-use l3p_robots::task::{filtered_action, projected_gravity};
+use l3p_task::task::{filtered_action, projected_gravity};
 use serde::{Deserialize, Serialize};
 
 use crate::heading::HeadingHold;

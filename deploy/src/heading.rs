@@ -2,7 +2,7 @@
 //! zero yaw-rate command means "keep this heading", closed on the base's measured yaw, instead of
 //! "zero yaw rate, whatever drift the policy has".
 
-use l3p_robots::task::{heading_yaw_rate, yaw_of};
+use l3p_task::task::{heading_yaw_rate, yaw_of};
 
 /// The task's heading-controller gain (`[env.commands] heading_stiffness`, IsaacLab's 0.5): yaw
 /// rate = gain · heading error.
@@ -46,7 +46,7 @@ impl HeadingHold {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use l3p_robots::task::quat_from_yaw;
+    use l3p_task::task::quat_from_yaw;
 
     #[test]
     fn holds_the_heading_of_the_first_zero_command_and_releases_on_a_turn() {

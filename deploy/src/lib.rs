@@ -8,11 +8,11 @@
 //! subscriber for robot state and commands), [`operate::operate`] (an operator's request to a
 //! running controller, resent until its status confirms it), [`io::ObservationBuilder`] (the
 //! observation of a wire robot state, built exactly as in training, for the I/O contract that
-//! `l3p_robots::io::robot_io` makes).
+//! `l3p_task::io::robot_io` makes).
 //!
 //! Architecture invariant: no burn, no rapier, no SQLite — a policy runs through `l3p-infer`, the
-//! robot is known through `l3p-robots` without its `sim` feature, the registry through its Zenoh
-//! client. The simulated robot that stands in for hardware (`l3p sim-robot`) lives with the
+//! robot is known through `l3p-robot` and its task through `l3p-task` (neither simulates), the
+//! registry through its Zenoh client. The simulated robot that stands in for hardware (`l3p sim-robot`) lives with the
 //! simulator, in `l3p-actor`.
 
 pub mod artifact;

@@ -15,7 +15,7 @@ use l3p_proto::{
     ControlMode, DeployStatus, OperatorAction, OperatorCommand, RobotState, WIRE_VERSION, codec,
     keys,
 };
-use l3p_robots::catalog::RobotSpec;
+use l3p_robot::catalog::RobotSpec;
 use tokio_util::sync::CancellationToken;
 use tracing::{info, warn};
 use zenoh::Wait;

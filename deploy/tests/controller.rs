@@ -7,11 +7,13 @@ use l3p_deploy::io::standing_state;
 use l3p_deploy::{Controller, Fault, ObservationBuilder, SafetyConfig, load_policy};
 use l3p_policy::RobotIo;
 use l3p_proto::{ControlMode, OperatorAction, RobotState};
-use l3p_robots::catalog::RobotSpec;
-use l3p_robots::config::{EnvConfig, GainsOverride, TerrainPreset};
-use l3p_robots::io::robot_io;
-use l3p_robots::task::{Task, TaskEnvState, quat_from_yaw_and_tilt, quat_rotate_inverse};
-use l3p_robots::terrain::Terrain;
+use l3p_robot::catalog::RobotSpec;
+use l3p_task::config::{EnvConfig, GainsOverride, TerrainPreset};
+use l3p_task::io::robot_io;
+use l3p_task::task::{
+    RobotTaskParams, Task, TaskEnvState, quat_from_yaw_and_tilt, quat_rotate_inverse,
+};
+use l3p_task::terrain::Terrain;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
@@ -81,7 +83,7 @@ fn observation_matches_with_clock(gait_clock_hz: f32) {
     let robot = a1();
     let spec = env.resolve("a1").unwrap();
     let terrain = Terrain::generate(&spec.terrain).unwrap();
-    let mut task = Task::new(spec, robot.task_params(&robot.model().unwrap())).unwrap();
+    let mut task = Task::new(spec, RobotTaskParams::of(robot, &robot.model().unwrap())).unwrap();
     task.spec.noise.enabled = false;
     let io = robot_io(robot, &env).unwrap();
     let builder = ObservationBuilder::new(&io).unwrap();
@@ -89,7 +91,7 @@ fn observation_matches_with_clock(gait_clock_hz: f32) {
     assert_eq!(dim, task.obs_dim());
     let mut rng = StdRng::seed_from_u64(3);
     for _ in 0..20 {
-        let mut sim = l3p_robots::task::SimState::default();
+        let mut sim = l3p_task::task::SimState::default();
         let yaw = rng.random_range(-3.0..3.0);
         // Some roll and pitch too.
         let (r, p) = (
@@ -157,7 +159,7 @@ fn policy_targets_follow_the_training_action_filter() {
     assert_eq!(io.action_filter_alpha, 0.4);
     let spec = env.resolve("a1").unwrap();
     let robot = a1();
-    let task = Task::new(spec, robot.task_params(&robot.model().unwrap())).unwrap();
+    let task = Task::new(spec, RobotTaskParams::of(robot, &robot.model().unwrap())).unwrap();
     let mut c = Controller::new("dog", io.clone(), 0.25, SafetyConfig::default()).unwrap();
     let mut policy = Flipping { amplitude: -0.6 };
     let state = standing(&io);
@@ -715,12 +717,12 @@ fn a_policy_is_simulated_at_its_own_gains_on_its_own_robot_only() {
     );
     let mut env = flat_env();
     env.randomization.kp_scale = Some([0.8, 1.0]); // centre 0.9: io / 0.9 × 0.9 = io again
-    let sim = l3p_robots::io::sim_env_for_policy(&env, &policy, "a1");
+    let sim = l3p_task::io::sim_env_for_policy(&env, &policy, "a1");
     let gains = sim.training_gains(a1());
     assert!((gains.kp * 0.9 - io.kp[0]).abs() < 1e-3, "{gains:?}");
     assert!((gains.kd - io.kd[0]).abs() < 1e-4, "{gains:?}");
     assert_eq!(sim.gait_clock_hz, io.gait_clock_hz);
     let go1 = RobotSpec::by_name("go1").unwrap();
-    let other = l3p_robots::io::sim_env_for_policy(&env, &policy, "go1");
+    let other = l3p_task::io::sim_env_for_policy(&env, &policy, "go1");
     assert_eq!(other.training_gains(go1), go1.training_gains);
 }

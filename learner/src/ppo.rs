@@ -97,7 +97,7 @@ struct Prepared {
 }
 
 /// Left-right mirror maps of one robot's observation and action (`out[i] = sign[i] · in[index[i]]`;
-/// built by `l3p_robots::mirror::TaskMirror` from the robot's geometry).
+/// built by `l3p_task::mirror::TaskMirror` from the robot's geometry).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Mirror {
     pub obs_index: Vec<usize>,

@@ -1,7 +1,7 @@
 //! String names of fieldless enums, written once: the [`string_enum!`] macro and [`join_names`].
 //!
 //! A leaf crate (no dependencies) so that every crate with config, CLI or wire spellings — the wire
-//! types of `l3p-proto`, the terrain types and reward terms of `l3p-robots`, the PPO modes of
+//! types of `l3p-proto`, the terrain types and reward terms of `l3p-task`, the leg ids of `l3p-robot`, the PPO modes of
 //! `l3p-learner` — shares one implementation without depending on each other.
 
 /// The string names of a fieldless enum, written once as `Variant => "name"` rows: `ALL` (every

@@ -1,6 +1,6 @@
 //! [`HeadMap`]: linear maps on a robot's observations and actions, folded into a copy of another
 //! robot's heads so that the copy acts on the new robot as the original acted on its own (the
-//! `mapped` transfer warm start; the maps come from `l3p_robots::morphology`).
+//! `mapped` transfer warm start; the maps come from `l3p_task::morphology`).
 //!
 //! Folding is exact for every layer that touches the robot's own spaces: the first layer of the
 //! encoder (the whole actor under `mlp`), of the critic and of `R_act` take mapped inputs

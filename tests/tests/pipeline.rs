@@ -6,8 +6,8 @@ use l3p_actor::{Collector, RolloutEnv, sim_env};
 use l3p_learner::{Mode, Ppo, PpoConfig, RolloutBatch, TransferHeads, init_model};
 use l3p_policy::{DeployPolicy, PolicyConfig};
 use l3p_proto::{RolloutChunk, codec};
-use l3p_robots::catalog::RobotSpec;
-use l3p_robots::config::{EnvConfig, TerrainPreset};
+use l3p_robot::catalog::RobotSpec;
+use l3p_task::config::{EnvConfig, TerrainPreset};
 
 #[test]
 fn one_iteration_from_simulator_to_updated_policy() {

@@ -1,6 +1,6 @@
 //! Workspace tidiness, read from the manifests and sources (in the spirit of rust-analyzer's `tidy`):
-//! project crates depend on each other only along the allowed graph below (ARCHITECTURE.md
-//! "Dependency graph" shows the same list), every normal dependency is used by its crate's sources,
+//! project crates depend on each other only along the allowed graph (read from ARCHITECTURE.md
+//! "Dependency graph", the one place it is written), every normal dependency is used by its crate's sources,
 //! so an unused one (compile time on two cores) cannot creep back, and the crates that reach the
 //! registry only over Zenoh do not link SQLite through another project crate, and the deploy
 //! controller links neither the simulator nor the training stack — nor does `l3p-deploy`, the lean
@@ -9,71 +9,36 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
 
-/// Project crate → the project crates its `[dependencies]` may name.
-const ALLOWED: &[(&str, &[&str])] = &[
-    ("l3p-names", &[]),
-    ("l3p-proto", &["l3p-names"]),
-    ("l3p-net", &[]),
-    ("l3p-infer", &[]),
-    ("l3p-robots", &["l3p-names", "l3p-infer"]),
-    ("l3p-policy", &["l3p-infer"]),
-    ("l3p-registry-client", &["l3p-proto"]),
-    ("l3p-registry", &["l3p-proto", "l3p-registry-client"]),
-    (
-        "l3p-learner",
-        &[
-            "l3p-names",
-            "l3p-proto",
-            "l3p-policy",
-            "l3p-registry-client",
-        ],
-    ),
-    (
-        "l3p-actor",
-        &[
-            "l3p-proto",
-            "l3p-net",
-            "l3p-infer",
-            "l3p-robots",
-            "l3p-deploy",
-        ],
-    ),
-    (
-        "l3p-deploy",
-        &[
-            "l3p-proto",
-            "l3p-net",
-            "l3p-infer",
-            "l3p-robots",
-            "l3p-registry-client",
-        ],
-    ),
-    (
-        "l3p-deploy-bin",
-        &[
-            "l3p-proto",
-            "l3p-net",
-            "l3p-robots",
-            "l3p-registry-client",
-            "l3p-deploy",
-        ],
-    ),
-    (
-        "l3p-cli",
-        &[
-            "l3p-proto",
-            "l3p-net",
-            "l3p-robots",
-            "l3p-policy",
-            "l3p-learner",
-            "l3p-actor",
-            "l3p-registry",
-            "l3p-deploy",
-            "l3p-deploy-bin",
-        ],
-    ),
-    ("l3p-tests", &[]),
-];
+/// Project crate → the project crates its `[dependencies]` may name, read from the one place the
+/// graph is written: the indented block under ARCHITECTURE.md's "Dependency graph" heading, one
+/// `crate → dep, dep` line per crate (short names: `robot` is `l3p-robot`; `(none…)` for none).
+fn allowed_graph() -> Vec<(String, Vec<String>)> {
+    let architecture = std::fs::read_to_string(root().join("ARCHITECTURE.md")).unwrap();
+    let after = architecture
+        .split_once("### Dependency graph")
+        .expect("ARCHITECTURE.md has a \"### Dependency graph\" section")
+        .1;
+    let full = |short: &str| format!("l3p-{}", short.trim());
+    let graph: Vec<(String, Vec<String>)> = after
+        .lines()
+        .skip_while(|l| !l.starts_with("    "))
+        .take_while(|l| l.starts_with("    "))
+        .map(|line| {
+            let (krate, deps) = line
+                .split_once('→')
+                .unwrap_or_else(|| panic!("ARCHITECTURE.md graph line without `→`: {line:?}"));
+            let deps = deps.trim();
+            let deps = if deps.starts_with("(none") {
+                Vec::new()
+            } else {
+                deps.split(',').map(full).collect()
+            };
+            (full(krate), deps)
+        })
+        .collect();
+    assert!(graph.len() > 3, "ARCHITECTURE.md's graph block not found");
+    graph
+}
 
 /// Crates that must not link SQLite (`rusqlite`), not even through other project crates: they talk
 /// to the registry over Zenoh with `l3p-registry-client`; only `l3p-registry` holds the store.
@@ -146,7 +111,11 @@ fn rust_sources(dir: &Path, out: &mut String) {
 
 #[test]
 fn project_crates_depend_only_along_the_allowed_graph() {
-    let allowed: BTreeMap<&str, &[&str]> = ALLOWED.iter().copied().collect();
+    let graph = allowed_graph();
+    let allowed: BTreeMap<&str, &[String]> = graph
+        .iter()
+        .map(|(k, deps)| (k.as_str(), deps.as_slice()))
+        .collect();
     let members = members();
     let mut violations = Vec::new();
     for m in &members {
@@ -155,15 +124,15 @@ fn project_crates_depend_only_along_the_allowed_graph() {
             continue;
         };
         for dep in m.dependencies.iter().filter(|d| d.starts_with("l3p-")) {
-            if !may.contains(&dep.as_str()) {
+            if !may.contains(dep) {
                 violations.push(format!("{} → {dep} is not an allowed edge", m.name));
             }
         }
     }
     assert_eq!(
         members.len(),
-        ALLOWED.len(),
-        "a crate is missing from ALLOWED"
+        graph.len(),
+        "ARCHITECTURE.md's graph names a crate that is not a workspace member"
     );
     assert!(violations.is_empty(), "{violations:#?}");
 }
@@ -393,6 +362,17 @@ fn linked_packages(start: &str) -> BTreeSet<String> {
 }
 
 #[test]
+fn robot_models_and_the_task_link_no_simulator() {
+    for krate in ["l3p-robot", "l3p-task"] {
+        let linked = linked_packages(krate);
+        assert!(
+            !linked.contains("rapier3d") && !linked.contains("l3p-sim"),
+            "{krate} links the simulator: {linked:?}"
+        );
+    }
+}
+
+#[test]
 fn the_deploy_controller_links_no_simulator_and_no_training_stack() {
     // The walk finds the simulator and burn where they are.
     let cli = linked_packages("l3p-cli");
@@ -400,14 +380,21 @@ fn the_deploy_controller_links_no_simulator_and_no_training_stack() {
     let actor = linked_packages("l3p-actor");
     assert!(actor.contains("rapier3d"), "the actor simulates: {actor:?}");
     let deploy = linked_packages("l3p-deploy");
-    let offenders: Vec<&str> = ["rapier3d", "burn", "rusqlite", "l3p-policy", "l3p-registry"]
-        .into_iter()
-        .filter(|p| deploy.contains(*p))
-        .collect();
+    let offenders: Vec<&str> = [
+        "rapier3d",
+        "burn",
+        "rusqlite",
+        "l3p-sim",
+        "l3p-policy",
+        "l3p-registry",
+    ]
+    .into_iter()
+    .filter(|p| deploy.contains(*p))
+    .collect();
     assert!(
         offenders.is_empty(),
         "l3p-deploy links {offenders:?} (through {deploy:?})\nhint: depend on l3p-infer (not \
-         l3p-policy), on l3p-robots without its `sim` feature, and on l3p-registry-client"
+         l3p-policy), on l3p-robot and l3p-task (not l3p-sim), and on l3p-registry-client"
     );
 }
 
@@ -415,6 +402,7 @@ fn the_deploy_controller_links_no_simulator_and_no_training_stack() {
 /// the simulator, the tensor and training stack, the registry store, the viewer.
 const NOT_IN_THE_LEAN_BINARY: &[&str] = &[
     "rapier3d",
+    "l3p-sim",
     "burn",
     "rusqlite",
     "rerun",
@@ -446,7 +434,7 @@ fn the_lean_deploy_binary_links_no_physics_learner_sqlite_or_viewer() {
     assert!(
         offenders.is_empty(),
         "l3p-deploy links {offenders:?} (through {lean:?})\nhint: the lean binary depends on \
-         l3p-deploy, l3p-infer (not l3p-policy), l3p-robots without `sim` and l3p-registry-client; \
+         l3p-deploy, l3p-infer (not l3p-policy), l3p-robot (not l3p-sim) and l3p-registry-client; \
          what only `l3p` needs goes in l3p-cli"
     );
     // And it is a binary of that package: the one that `cargo build -p l3p-deploy-bin` makes.

@@ -486,7 +486,7 @@ fn terrain_reach_is_tabled_per_type_and_evaluated_on_one_type_with_the_curriculu
     assert_eq!(mean_reach(zs, &types)[0], 4.0);
     assert!(mean_reach(zs, &types)[1].is_nan());
 
-    let mut env = l3p_robots::config::EnvConfig::default();
+    let mut env = l3p_task::config::EnvConfig::default();
     env.terrain.preset = TerrainPreset::SimpleRough;
     let one = single_terrain_env(&env, TerrainType::Boxes);
     assert_eq!(one.terrain.preset, TerrainPreset::Curriculum);
@@ -494,7 +494,7 @@ fn terrain_reach_is_tabled_per_type_and_evaluated_on_one_type_with_the_curriculu
     let spec = one.terrain.resolve("go1").unwrap();
     assert_eq!(
         spec.proportions,
-        l3p_robots::terrain::TypeProportions::only(TerrainType::Boxes)
+        l3p_task::terrain::TypeProportions::only(TerrainType::Boxes)
     );
     env.terrain.preset = TerrainPreset::Paper;
     assert_eq!(

@@ -60,7 +60,7 @@ pub enum TransferHeads {
     /// recovery modules when the dimensions match — the same warm start `mlp-transfer` gets.
     Prototype,
     /// The prototype's copy with the robots' morphology folded in: joint observations and actions
-    /// mapped leg by leg as equal foot displacements (`l3p_robots::morphology`,
+    /// mapped leg by leg as equal foot displacements (`l3p_task::morphology`,
     /// `l3p_policy::HeadMap`), so the copy moves the new robot's feet as it moved the prototype's.
     /// Also applies to `mlp-transfer`.
     Mapped,
