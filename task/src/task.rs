@@ -599,7 +599,9 @@ impl Task {
                     .zip(target)
                     .filter(|(_, h)| *h > 0.0)
                     .map(|(sole, h)| {
-                        let clearance = sole[2] - terrain.height_at(sole[0], sole[1]);
+                        let ground =
+                            terrain.max_height_within(sole[0], sole[1], p.feet_clearance_radius);
+                        let clearance = sole[2] - ground;
                         (h - clearance).max(0.0).powi(2)
                     })
                     .sum();

@@ -810,6 +810,24 @@ impl Terrain {
         a * (1.0 - ty) + b * ty
     }
 
+    /// The highest ground within `radius` (m) of `(x, y)`: [`Terrain::height_at`] at the point
+    /// and on two rings around it (8 samples at `radius` / 2 and 16 at `radius`), so a step edge
+    /// within the radius is seen whatever the direction. `radius <= 0`: the height at the point.
+    pub fn max_height_within(&self, x: f32, y: f32, radius: f32) -> f32 {
+        let mut highest = self.height_at(x, y);
+        if self.is_flat() || radius <= 0.0 {
+            return highest;
+        }
+        for (ring_radius, samples) in [(0.5 * radius, 8), (radius, 16)] {
+            for k in 0..samples {
+                let angle = std::f32::consts::TAU * k as f32 / samples as f32;
+                let (sin, cos) = angle.sin_cos();
+                highest = highest.max(self.height_at(x + ring_radius * cos, y + ring_radius * sin));
+            }
+        }
+        highest
+    }
+
     /// The tile (`level`, `col`) that holds world `(x, y)`, if any (the border holds none).
     pub fn tile_at(&self, x: f32, y: f32) -> Option<(usize, usize)> {
         let l = self.spec.tile_size;

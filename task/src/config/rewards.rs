@@ -93,6 +93,11 @@ pub struct RewardParams {
     /// Peak swing height of `feet_clearance` (the sole above the terrain under it) as a fraction
     /// of the robot's standing height: 0.25 is 7.5 cm for A1, above the lowest stair riser (5 cm).
     pub feet_clearance_fraction: f32,
+    /// Horizontal radius (m) of the ground `feet_clearance` measures a swing sole against: the
+    /// highest terrain within this distance of the sole (`Terrain::max_height_within`), so that a
+    /// foot swinging towards a stair riser is asked to clear the step ahead before it reaches it.
+    /// 0 (the default): the terrain straight under the sole.
+    pub feet_clearance_radius: f32,
 }
 
 impl Default for RewardParams {
@@ -109,6 +114,7 @@ impl Default for RewardParams {
             only_positive_rewards: false,
             base_height_fraction: 1.0,
             feet_clearance_fraction: 0.25,
+            feet_clearance_radius: 0.0,
         }
     }
 }
@@ -142,7 +148,7 @@ reward_terms! {
     /// std 0.35 pays e⁻⁸ and its gradient has vanished).
     TrackLinVelXyCoarseExp => track_lin_vel_xy_coarse_exp = 0.0,
     /// Σ over the feet the trot clock swings of `max(h* − h, 0)²`: h the sole's height above the
-    /// terrain under it, h* = `feet_clearance_fraction` × standing height × sin(π · swing
+    /// terrain under it (the highest within `feet_clearance_radius`), h* = `feet_clearance_fraction` × standing height × sin(π · swing
     /// progress) (`task::gait_clock_swing_height`). Zero without a gait clock or a move command.
     FeetClearance => feet_clearance = 0.0,
     /// `exp(−err²/coarse_tracking_std²)` of the yaw-rate error: the yaw twin of

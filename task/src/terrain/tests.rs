@@ -267,3 +267,30 @@ fn terrain_type_names_are_the_serde_names_and_the_proportions_keys() {
     assert_eq!(TerrainType::from_name("stairs"), None);
     assert!(TerrainType::names().ends_with("pyramid_slope or inverted_pyramid_slope"));
 }
+
+/// `feet_clearance_radius`: the ground a swing foot is measured against is the highest within the
+/// radius, so a foot 8 cm before a stair riser is asked to clear the step beyond it.
+#[test]
+fn max_height_within_sees_the_step_ahead() {
+    let spec = small_spec(TerrainPreset::Curriculum);
+    let t = Terrain::generate(&spec).unwrap();
+    let o = t.tile_origin(3, 0);
+    let h = stairs_step_height(&spec.params, t.tile_difficulty(3, 0));
+    // On the first ring (height h) of a pyramid-stairs tile, 8 cm before the second (2 h).
+    let (x, y) = (o[0] - 4.0 + 1.22, o[1]);
+    assert!((t.height_at(x, y) - h).abs() < 1e-5);
+    assert_eq!(t.max_height_within(x, y, 0.0), t.height_at(x, y));
+    assert!(
+        (t.max_height_within(x, y, 0.02) - h).abs() < 1e-5,
+        "the riser is farther"
+    );
+    assert!(
+        (t.max_height_within(x, y, 0.1) - 2.0 * h).abs() < 1e-5,
+        "the step ahead"
+    );
+    // The highest, not the nearest: from the second ring the first (lower) one is ignored.
+    let (x2, y2) = (o[0] - 4.0 + 1.38, o[1]);
+    assert!((t.max_height_within(x2, y2, 0.1) - 2.0 * h).abs() < 1e-5);
+    let flat = Terrain::generate(&small_spec(TerrainPreset::Flat)).unwrap();
+    assert_eq!(flat.max_height_within(1.0, 2.0, 0.1), 0.0);
+}
