@@ -18,7 +18,7 @@
 use std::time::{Duration, Instant};
 
 use l3p_policy::DeployPolicy;
-use l3p_policy::infer::InferScratch;
+use l3p_policy::InferScratch;
 use l3p_robot::catalog::{NUM_JOINTS, RobotSpec};
 use l3p_robot::model::{ShapeSpec, pose_arrays};
 use l3p_sim::vecenv::VecEnv;

@@ -708,7 +708,7 @@ fn the_contract_carries_the_gains_the_policy_was_trained_around() {
 fn a_policy_is_simulated_at_its_own_gains_on_its_own_robot_only() {
     let dir =
         std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../docs/a1-flat-session31/policy");
-    let policy = l3p_policy::infer::read_export_json(&dir).unwrap();
+    let policy = l3p_policy::export::read_export_json(&dir).unwrap();
     let io = policy.io.as_ref().unwrap();
     assert_eq!(
         io.kp[0].round(),

@@ -6,7 +6,7 @@
 //!   length-prefixed (u64 LE) sections: JSON header, model burnpack, optimiser burnpack (may be empty).
 //!   [`checkpoint_to_bytes`] / [`checkpoint_from_bytes`], [`save_checkpoint`] / [`load_checkpoint`].
 //! - **Export** (deploy one robot's policy): encoder + core + decoder (or the MLP actor), std and
-//!   action scale as safetensors with a JSON config (format in [`crate::infer`]). [`export_bytes`],
+//!   action scale as safetensors with a JSON config (format in [`crate::export`]). [`export_bytes`],
 //!   [`export_to_dir`]; read back with [`crate::DeployPolicy`] (pure Rust, no burn).
 
 use std::path::Path;
@@ -20,7 +20,7 @@ use sha2::{Digest, Sha256};
 
 use crate::PolicyError;
 use crate::config::{PolicyConfig, PolicyRobot};
-use crate::infer::{EXPORT_FORMAT, ExportConfig, ExportLayer, export_metadata};
+use crate::export::{EXPORT_FORMAT, ExportConfig, ExportLayer, export_metadata};
 use crate::model::{PolicyModel, PolicyNet, RobotHeads, tensor_to_vec};
 use crate::nets::Mlp;
 

@@ -15,7 +15,7 @@
 //! - I/O ([`checkpoint`], the only module that reads or writes model files):
 //!   [`checkpoint_to_bytes`] / [`checkpoint_from_bytes`] / [`save_checkpoint`] / [`load_checkpoint`]
 //!   (model + optimiser + iteration), [`export_bytes`] / [`export_to_dir`] (one robot's deployable
-//!   policy, safetensors + JSON, format documented in [`infer`]).
+//!   policy, safetensors + JSON, format documented in [`export`]).
 //! - Inference without burn: [`DeployPolicy`] (`load`, `from_bytes`, `act`, `act_into`, `sample`).
 //! - Devices: [`cpu_device`] (`flex`, the measured choice), [`train_device`] (its autodiff form).
 //!
@@ -29,7 +29,7 @@ pub mod nets;
 
 // The burn-free half (description, export format, pure-Rust inference, errors) lives in
 // `l3p-infer`, so that the deploy controller does not link burn; re-exported whole.
-pub use l3p_infer::{PolicyError, config, export as infer};
+pub use l3p_infer::{PolicyError, config, export};
 
 pub use checkpoint::{
     Checkpoint, CheckpointHeader, checkpoint_from_bytes, checkpoint_to_bytes, core_sha256,

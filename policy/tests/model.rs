@@ -326,7 +326,7 @@ fn export_reloads_in_a_fresh_process() {
         }
         // The JSON beside the weights is the same config.
         assert_eq!(
-            l3p_policy::infer::read_export_json(dir.path()).unwrap(),
+            l3p_policy::export::read_export_json(dir.path()).unwrap(),
             cfg
         );
     }
