@@ -16,8 +16,8 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use l3p_learner::report::ReportRow;
 use l3p_learner::{Mode, TransferHeads};
+use l3p_report::ReportRow;
 use l3p_task::config::TerrainPreset;
 use l3p_task::terrain::TerrainType;
 use serde::{Deserialize, Serialize};
@@ -863,7 +863,7 @@ pub fn process_alive(pid: u32) -> bool {
 
 /// The last learner iteration in a run's metrics file (0 when none).
 pub fn last_iteration(run_dir: &Path) -> u64 {
-    l3p_learner::report::load_learner_records(&l3p_learner::daemon::metrics_path(run_dir))
+    l3p_report::load_learner_records(&l3p_learner::daemon::metrics_path(run_dir))
         .ok()
         .and_then(|r| r.last().map(|r| r.iteration))
         .unwrap_or(0)
@@ -884,7 +884,7 @@ pub struct ArmResult {
     pub eval_yaw_rate_error: f64,
     pub eval_return: f64,
     pub zero_shot_return: Option<f64>,
-    /// `(iteration, reward)` for "when did it reach a bar" ([`l3p_learner::report::reward_for_bars`]).
+    /// `(iteration, reward)` for "when did it reach a bar" ([`l3p_report::reward_for_bars`]).
     pub reward_for_bars: Vec<(f64, f64)>,
     /// Whether the arm trained over a terrain curriculum (on flat ground the level is meaningless
     /// and its columns stay empty).

@@ -11,8 +11,8 @@ use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use clap::{Args, Subcommand};
-use l3p_learner::report::{ReportRow, load_learner_records, series, smooth};
 use l3p_proto::MetricsRecord;
+use l3p_report::{ReportRow, load_learner_records, series, smooth};
 use l3p_task::config::TerrainPreset;
 
 use crate::config::Config;
@@ -763,7 +763,7 @@ fn collect_results(arms: &[Arm], finished: &[Finished], window: usize) -> Vec<Ar
                     TerrainPreset::Curriculum | TerrainPreset::Paper
                 ))
             },
-            reward_for_bars: l3p_learner::report::reward_for_bars(records, window),
+            reward_for_bars: l3p_report::reward_for_bars(records, window),
             terrain_reach: final_levels(&done.by_terrain),
             zero_shot_reach: arm
                 .depends_on
@@ -820,7 +820,7 @@ fn time_to_scratch_section(results: &[ArmResult], window: usize) -> String {
          bound, ≥). Resolution: every environment starts its first episode at step 0, so episodes \
          that do not fall end together, once per episode length (≈ 42 iterations for 1,000-step \
          episodes at 24 steps per iteration): smaller differences are not resolved.\n",
-        l3p_learner::report::BAR_MIN_EPISODES
+        l3p_report::BAR_MIN_EPISODES
     );
     for (share, table) in SHARES.iter().zip(&tables) {
         md.push_str(&format!(
@@ -876,11 +876,11 @@ fn terrain_reach_section(
         let title = format!("{robot} — terrain level reached");
         std::fs::write(
             out.join(format!("{robot}-terrains.svg")),
-            l3p_learner::report::svg_radar(&title, &axes, &series, max_level),
+            l3p_report::svg_radar(&title, &axes, &series, max_level),
         )?;
         std::fs::write(
             out.join(format!("{robot}-terrains.png")),
-            l3p_learner::report::png_radar(&title, &axes, &series, max_level),
+            l3p_report::png_radar(&title, &axes, &series, max_level),
         )?;
         md.push_str(&format!(
             "\n![{robot} terrain levels]({robot}-terrains.svg)\n"
@@ -993,11 +993,11 @@ fn report_cmd(spec_path: &Path, window: usize) -> anyhow::Result<()> {
             let title = format!("{robot} — {label}");
             std::fs::write(
                 out.join(format!("{robot}-{key}.svg")),
-                l3p_learner::report::svg_bands(&title, label, &lines),
+                l3p_report::svg_bands(&title, label, &lines),
             )?;
             std::fs::write(
                 out.join(format!("{robot}-{key}.png")),
-                l3p_learner::report::png_bands(&title, label, &lines),
+                l3p_report::png_bands(&title, label, &lines),
             )?;
             md.push_str(&format!("\n![{robot} {label}]({robot}-{key}.svg)\n"));
         }

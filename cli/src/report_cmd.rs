@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use clap::Args;
 use l3p_learner::daemon::metrics_path;
-use l3p_learner::report::{
+use l3p_report::{
     ReportRow, load_learner_records, png_bands, png_chart, series, smooth, svg_bands, svg_chart,
 };
 

@@ -65,7 +65,7 @@ envs = 4
         .filter(|p| p.to_string_lossy().contains("events.out.tfevents."))
         .collect();
     assert_eq!(events.len(), 1, "{events:?}");
-    let steps: Vec<i64> = l3p_learner::tensorboard::read_events(&events[0])
+    let steps: Vec<i64> = l3p_report::tensorboard::read_events(&events[0])
         .unwrap()
         .iter()
         .filter(|e| e.scalars.iter().any(|(t, _)| t == "Perf/total_fps"))

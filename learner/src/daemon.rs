@@ -556,7 +556,7 @@ struct Outputs<'a> {
     /// What the current announce lists (one entry per robot).
     weights: Vec<RobotWeights>,
     metrics_file: PathBuf,
-    tensorboard: Option<crate::tensorboard::EventWriter>,
+    tensorboard: Option<l3p_report::tensorboard::EventWriter>,
     uploader: Option<RegistryUploader>,
     checkpoints: CheckpointSchedule,
     progress: Option<mpsc::UnboundedSender<IterationReport>>,
@@ -573,7 +573,7 @@ impl<'a> Outputs<'a> {
     ) -> Result<Self, DaemonError> {
         // TensorBoard scalars beside metrics.jsonl; a failure to write them costs the curves,
         // never the run.
-        let tensorboard = match crate::tensorboard::EventWriter::create(&opts.run_dir) {
+        let tensorboard = match l3p_report::tensorboard::EventWriter::create(&opts.run_dir) {
             Ok(w) => Some(w),
             Err(e) => {
                 warn!(dir = %opts.run_dir.display(), "no TensorBoard events for this run: {e}");

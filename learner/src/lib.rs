@@ -21,8 +21,9 @@
 //!   actors) as a pure, unit-tested state machine.
 //! - [`uploader::RegistryUploader`]: the daemon's background registry uploads (retried with
 //!   backoff; an outage never stops training).
-//! - [`tensorboard::EventWriter`]: every metrics record also as TensorBoard scalars in the run's
-//!   directory (rsl_rl's tag names).
+//! - The daemon writes every metrics record also as TensorBoard scalars in the run's directory
+//!   (rsl_rl's tag names) with `l3p_report::tensorboard::EventWriter`; charts and reports are
+//!   `l3p-report`'s.
 //!
 //! Architecture invariant: no rapier; Zenoh is only used by the daemon module (not in this file set).
 
@@ -32,10 +33,7 @@ pub mod gae;
 pub mod gather;
 mod links;
 pub mod ppo;
-pub mod raster;
-pub mod report;
 pub mod storage;
-pub mod tensorboard;
 pub mod uploader;
 
 pub use gae::{compute_gae, explained_variance, normalize};

@@ -1,14 +1,24 @@
-//! Training reports from a run's metrics file: curves as SVG and the paper-style convergence row.
+//! Training reports from a run's metrics file: curves as SVG and PNG, the paper-style convergence
+//! row, radar charts, and TensorBoard event files.
 //!
 //! Main items: [`load_learner_records`], [`series`], [`smooth`], [`convergence_iteration`],
 //! [`ReportRow`] (`ReportRow::from_records`), [`svg_chart`], [`svg_bands`] (curves over seeds), and
 //! their PNG twins [`png_chart`], [`png_bands`] (drawn by [`crate::raster`]); [`svg_radar`] /
-//! [`png_radar`] (one polygon per method over several axes, e.g. terrain types).
+//! [`png_radar`] (one polygon per method over several axes, e.g. terrain types);
+//! [`tensorboard::EventWriter`] (the learner's metrics as TensorBoard scalars) and
+//! [`tensorboard::read_events`].
+//!
+//! Architecture invariant: reads and writes metrics and pictures only — no burn, no Zenoh, no
+//! simulator; the learner writes its TensorBoard file through this crate, `l3p report` and
+//! `l3p experiment report` draw with it.
 //!
 //! Convergence (DESIGN §6): the first iteration at which the smoothed curve reaches a fraction of its
 //! final value. Rewards can be negative, so "85% of the final value" is measured over the range the
 //! curve travelled: the first iteration where `smoothed ≥ start + 0.85 · (final − start)`, with
 //! `start` and `final` the means of the first and last 5% of the smoothed curve.
+
+pub mod raster;
+pub mod tensorboard;
 
 use std::io::BufRead;
 use std::path::Path;

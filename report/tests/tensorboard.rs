@@ -1,8 +1,8 @@
 //! TensorBoard event files: framing and CRCs read back, tags and steps as written, and — where
 //! Python's `tensorboard` package is installed — TensorBoard's own reader agrees.
 
-use l3p_learner::tensorboard::{EventWriter, read_events, tfrecord};
 use l3p_proto::MetricsRecord;
+use l3p_report::tensorboard::{EventWriter, read_events, tfrecord};
 
 fn record(iteration: u64, reward: f64) -> MetricsRecord {
     let mut r = MetricsRecord::new("run", "learner", iteration, 1_700_000_000_000 + iteration);
@@ -57,7 +57,7 @@ fn a_corrupt_or_truncated_file_is_an_error_naming_the_record() {
     // A length that claims more than the file holds.
     let mut huge = tfrecord(b"x");
     huge[..8].copy_from_slice(&u64::MAX.to_le_bytes());
-    let crc = l3p_learner::tensorboard::masked_crc32c(&huge[..8]);
+    let crc = l3p_report::tensorboard::masked_crc32c(&huge[..8]);
     huge[8..12].copy_from_slice(&crc.to_le_bytes());
     std::fs::write(&path, &huge).unwrap();
     let err = read_events(&path).unwrap_err().to_string();
