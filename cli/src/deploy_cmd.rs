@@ -195,7 +195,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
         })?
     };
     // Only checkpoints without an `io` get one here: they predate the clock and the filter.
-    let env_for = |obs_dim: usize| l3p_task::io::env_for_policy(&config.env, obs_dim, None);
+    let env_for = |obs_dim: usize| l3p_task::contract::env_for_policy(&config.env, obs_dim, None);
     let (export, export_config) = if l3p_policy::is_checkpoint(&bytes) {
         let mut ckpt = l3p_policy::checkpoint_from_bytes(&bytes, &cpu_device())?;
         let names: Vec<String> = ckpt.model.robots.iter().map(|r| r.name.clone()).collect();
@@ -212,7 +212,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
             .ok_or_else(|| anyhow::anyhow!("the checkpoint has no {name} (it has {names:?})"))?;
         let spec = &mut ckpt.model.robots[idx];
         if spec.io.is_none() {
-            spec.io = Some(l3p_task::io::robot_io(
+            spec.io = Some(l3p_task::contract::robot_io(
                 Robot::by_name(&name)?,
                 &env_for(spec.obs_dim),
             )?);
@@ -227,7 +227,7 @@ pub fn export(args: ExportArgs) -> anyhow::Result<()> {
             anyhow::bail!("{} is a policy for {}, not {r}", args.source, cfg.robot);
         }
         if cfg.io.is_none() {
-            cfg.io = Some(l3p_task::io::robot_io(
+            cfg.io = Some(l3p_task::contract::robot_io(
                 Robot::by_name(&cfg.robot)?,
                 &env_for(cfg.obs_dim),
             )?);

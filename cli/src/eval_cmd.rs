@@ -297,7 +297,7 @@ pub fn evaluate_row(
     action_filter_alpha: Option<f32>,
 ) -> anyhow::Result<EvalRow> {
     // The policy's own observation and action contract, whatever the config says.
-    let mut env = l3p_task::io::sim_env_for_policy(env, &policy.config, robot.name);
+    let mut env = l3p_task::contract::sim_env_for_policy(env, &policy.config, robot.name);
     if let Some(alpha) = action_filter_alpha {
         env.action_filter_alpha = alpha;
     }
@@ -362,8 +362,11 @@ pub fn run(args: EvalArgs) -> anyhow::Result<()> {
         args.level,
     )?;
     // A blind policy runs without the height scan (evaluate_row applies the whole contract).
-    config.env =
-        l3p_task::io::env_for_policy(&config.env, policy.obs_dim(), policy.config.io.as_ref());
+    config.env = l3p_task::contract::env_for_policy(
+        &config.env,
+        policy.obs_dim(),
+        policy.config.io.as_ref(),
+    );
     if let Some(range) = &args.lin_vel_x {
         if range.len() != 2 || range[0] > range[1] {
             anyhow::bail!("--lin-vel-x takes MIN,MAX with MIN <= MAX, got {range:?}");

@@ -119,7 +119,7 @@ fn build_players(
     let mut players = Vec::with_capacity(entries.len());
     for (k, (entry, policy)) in entries.into_iter().enumerate() {
         let spec = RobotSpec::by_name(&entry.robot)?;
-        let mut env_cfg = l3p_task::io::sim_env_for_policy(env, &policy.config, spec.name);
+        let mut env_cfg = l3p_task::contract::sim_env_for_policy(env, &policy.config, spec.name);
         crate::eval_cmd::constant_command(&mut env_cfg, first.vx, first.vy, first.wz);
         let mut env = VecEnv::new(spec, &env_cfg, 1, 1, seed)?;
         if env.obs_dim() != policy.obs_dim() || env.action_dim() != policy.action_dim() {

@@ -130,7 +130,7 @@ pub fn policy_robot(config: &Config, robot: &Robot) -> anyhow::Result<l3p_policy
         obs_dim: obs_dim(config),
         action_dim: l3p_robot::catalog::NUM_JOINTS,
         action_scale: robot.action_scale,
-        io: Some(l3p_task::io::robot_io(robot, &config.env)?),
+        io: Some(l3p_task::contract::robot_io(robot, &config.env)?),
     })
 }
 

@@ -72,7 +72,7 @@ async fn the_lean_binary_runs_a_policy_through_start_up_and_stops_through_dampin
         .await
         .unwrap();
     let deadline = Instant::now() + Duration::from_secs(60);
-    let mut state = l3p_deploy::io::standing_state(&io, "lean-dog");
+    let mut state = l3p_deploy::observation::standing_state(&io, "lean-dog");
     let exit = loop {
         if let Some(status) = child.try_wait().unwrap() {
             break status;

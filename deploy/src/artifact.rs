@@ -10,10 +10,10 @@ use l3p_proto::registry::{ArtifactKind, ArtifactMeta};
 use l3p_registry_client::RegistryClient;
 use l3p_robot::catalog::RobotSpec;
 use l3p_task::config::EnvConfig;
-use l3p_task::io::{env_for_policy, robot_io};
+use l3p_task::contract::{env_for_policy, robot_io};
 
 use crate::DeployError;
-use crate::io::{ObservationBuilder, standing_state};
+use crate::observation::{ObservationBuilder, standing_state};
 
 /// A policy checked against its robot, ready to arm.
 #[derive(Debug, Clone)]

@@ -19,7 +19,7 @@ use l3p_task::task::{filtered_action, projected_gravity};
 use serde::{Deserialize, Serialize};
 
 use crate::heading::HeadingHold;
-use crate::io::ObservationBuilder;
+use crate::observation::ObservationBuilder;
 
 /// Safety settings (`[deploy]` in the config).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -40,7 +40,7 @@ impl RobotMessage for RobotCommand {
 
 type Slot<T> = Arc<Mutex<Option<(T, Instant)>>>;
 
-/// A check beyond decoding and validation (e.g. [`crate::io::plausible_state`]).
+/// A check beyond decoding and validation (e.g. [`crate::observation::plausible_state`]).
 pub type ExtraCheck<T> = Box<dyn Fn(&T) -> Result<(), String> + Send + Sync>;
 
 /// The newest valid `T` on a key, with its receive time (monotonic clock of this process).

@@ -6,9 +6,9 @@
 //! [`heading::HeadingHold`] (a zero yaw-rate command as a held heading),
 //! [`runtime::run_deploy`] (the deadline loop with Zenoh I/O), [`latest::LatestSlot`] (latest-value
 //! subscriber for robot state and commands), [`operate::operate`] (an operator's request to a
-//! running controller, resent until its status confirms it), [`io::ObservationBuilder`] (the
+//! running controller, resent until its status confirms it), [`observation::ObservationBuilder`] (the
 //! observation of a wire robot state, built exactly as in training, for the I/O contract that
-//! `l3p_task::io::robot_io` makes).
+//! `l3p_task::contract::robot_io` makes).
 //!
 //! Architecture invariant: no burn, no rapier, no SQLite — a policy runs through `l3p-infer`, the
 //! robot is known through `l3p-robot` and its task through `l3p-task` (neither simulates), the
@@ -18,8 +18,8 @@
 pub mod artifact;
 pub mod controller;
 pub mod heading;
-pub mod io;
 pub mod latest;
+pub mod observation;
 pub mod operate;
 pub mod pacer;
 pub mod runtime;
@@ -27,7 +27,7 @@ pub mod stats;
 
 pub use artifact::{LoadedPolicy, fetch_policy, load_policy, read_policy_file};
 pub use controller::{Controller, Fault, SafetyConfig};
-pub use io::ObservationBuilder;
+pub use observation::ObservationBuilder;
 pub use operate::{OperateError, operate};
 pub use runtime::{DeployOptions, run_deploy};
 

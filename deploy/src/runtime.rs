@@ -77,7 +77,7 @@ pub async fn run_deploy(
         &opts.robot_id,
         opts.robot.joint_names.len(),
         Some(Box::new(move |s: &RobotState| {
-            crate::io::plausible_state(s, &believable_io)
+            crate::observation::plausible_state(s, &believable_io)
         })),
     )
     .await?;

@@ -3,13 +3,13 @@
 //! checks refuse what does not fit the robot.
 
 use l3p_deploy::controller::{Latest, PolicyFn};
-use l3p_deploy::io::standing_state;
+use l3p_deploy::observation::standing_state;
 use l3p_deploy::{Controller, Fault, ObservationBuilder, SafetyConfig, load_policy};
 use l3p_policy::RobotIo;
 use l3p_proto::{ControlMode, OperatorAction, RobotState};
 use l3p_robot::catalog::RobotSpec;
 use l3p_task::config::{EnvConfig, GainsOverride, TerrainPreset};
-use l3p_task::io::robot_io;
+use l3p_task::contract::robot_io;
 use l3p_task::task::{
     RobotTaskParams, Task, TaskEnvState, quat_from_yaw_and_tilt, quat_rotate_inverse,
 };
@@ -631,7 +631,7 @@ fn wait_for_operator_keeps_the_robot_limp_until_resume() {
 /// robot to 42° of tilt before) are not believed; a real standing state is.
 #[test]
 fn physically_absurd_states_are_not_believed() {
-    use l3p_deploy::io::plausible_state;
+    use l3p_deploy::observation::plausible_state;
     let io = a1_io();
     let ok = standing(&io);
     plausible_state(&ok, &io).unwrap();
@@ -717,12 +717,12 @@ fn a_policy_is_simulated_at_its_own_gains_on_its_own_robot_only() {
     );
     let mut env = flat_env();
     env.randomization.kp_scale = Some([0.8, 1.0]); // centre 0.9: io / 0.9 × 0.9 = io again
-    let sim = l3p_task::io::sim_env_for_policy(&env, &policy, "a1");
+    let sim = l3p_task::contract::sim_env_for_policy(&env, &policy, "a1");
     let gains = sim.training_gains(a1());
     assert!((gains.kp * 0.9 - io.kp[0]).abs() < 1e-3, "{gains:?}");
     assert!((gains.kd - io.kd[0]).abs() < 1e-4, "{gains:?}");
     assert_eq!(sim.gait_clock_hz, io.gait_clock_hz);
     let go1 = RobotSpec::by_name("go1").unwrap();
-    let other = l3p_task::io::sim_env_for_policy(&env, &policy, "go1");
+    let other = l3p_task::contract::sim_env_for_policy(&env, &policy, "go1");
     assert_eq!(other.training_gains(go1), go1.training_gains);
 }

@@ -1,4 +1,4 @@
-//! The deploy side of the robot I/O contract ([`RobotIo`], built by `l3p_task::io::robot_io`):
+//! The deploy side of the robot I/O contract ([`RobotIo`], built by `l3p_task::contract::robot_io`):
 //! [`ObservationBuilder`] turns a wire [`RobotState`] into the policy's observation exactly as the
 //! training task does (`l3p_task::task::Task::observe` with noise off — a test compares the two),
 //! [`plausible_state`] decides which states to believe, [`standing_state`] is the robot at rest.
@@ -6,7 +6,7 @@
 use l3p_infer::RobotIo;
 use l3p_proto::RobotState;
 use l3p_task::config::GAIT_CLOCK_OBS;
-use l3p_task::io::GAIT_CLOCK_SEGMENT;
+use l3p_task::contract::GAIT_CLOCK_SEGMENT;
 use l3p_task::task::{gait_clock_observation, gait_clock_phase, projected_gravity};
 
 use crate::DeployError;
