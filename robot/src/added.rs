@@ -327,10 +327,6 @@ impl AddError {
     }
 }
 
-fn bad(key: &str, value: impl std::fmt::Display, why: &str) -> AddError {
-    AddError::bad_value(key, value, why)
-}
-
 fn leak(s: String) -> &'static str {
     Box::leak(s.into_boxed_str())
 }
@@ -343,7 +339,7 @@ impl RobotDescription {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(bad(key, v, "expected a finite value > 0"))
+                Err(AddError::bad_value(key, v, "expected a finite value > 0"))
             }
         };
         positive("kp", self.kp)?;
@@ -356,14 +352,14 @@ impl RobotDescription {
             positive(&format!("velocity_limit[{k}]"), self.velocity_limit[k])?;
             let q = self.default_pose[k];
             if !q.is_finite() || q.abs() > 2.0 * std::f32::consts::PI {
-                return Err(bad(
+                return Err(AddError::bad_value(
                     &format!("default_pose[{k}]"),
                     q,
                     "expected a finite angle within ±2π",
                 ));
             }
             if self.axis_signs[k] != 1.0 && self.axis_signs[k] != -1.0 {
-                return Err(bad(
+                return Err(AddError::bad_value(
                     &format!("axis_signs[{k}]"),
                     self.axis_signs[k],
                     "expected 1 or -1",
@@ -371,7 +367,7 @@ impl RobotDescription {
             }
         }
         if self.penalised_links.len() > MAX_PENALISED_BODIES {
-            return Err(bad(
+            return Err(AddError::bad_value(
                 "penalised_links",
                 self.penalised_links.len(),
                 &format!("at most {MAX_PENALISED_BODIES} links"),
@@ -379,7 +375,7 @@ impl RobotDescription {
         }
         for (i, h) in self.mesh_hulls.iter().enumerate() {
             if h.points.len() > MAX_HULL_POINTS {
-                return Err(bad(
+                return Err(AddError::bad_value(
                     &format!("mesh_hulls[{i}].points"),
                     h.points.len(),
                     &format!("at most {MAX_HULL_POINTS} points (mesh `{}`)", h.file),
@@ -403,7 +399,7 @@ impl RobotDescription {
                 .and_then(|b| model.bodies[b].joint.as_ref())
                 .is_some_and(|s| s.kind == JointKind::Revolute);
             if !ok {
-                return Err(bad(
+                return Err(AddError::bad_value(
                     &format!("joint_names[{k}]"),
                     j,
                     "no revolute joint of that name in the URDF",
@@ -417,7 +413,11 @@ impl RobotDescription {
             .chain(self.termination_links.iter().cloned());
         for l in links {
             if model.body_of_link(&l).is_none() {
-                return Err(bad("links", &l, "no link of that name in the URDF"));
+                return Err(AddError::bad_value(
+                    "links",
+                    &l,
+                    "no link of that name in the URDF",
+                ));
             }
         }
         let strs = |v: &[String]| -> &'static [&'static str] {
