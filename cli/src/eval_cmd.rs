@@ -257,6 +257,10 @@ pub struct EvalRow {
     pub summary: l3p_actor::EvalSummary,
     /// Walk-criterion bounds that fail (empty: it walks).
     pub walk_failures: Vec<String>,
+    /// What the row's conditions add to the command, when they are not the check's usual ones
+    /// (the walk check's pass at the trained centre-of-mass shift with heading hold on).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub condition: Option<String>,
 }
 
 /// Sets a constant forward command: vx = v, vy = wz = 0, heading mode off, nobody standing.
@@ -312,6 +316,7 @@ pub fn evaluate_row(
         forward,
         summary: s,
         walk_failures,
+        condition: None,
     })
 }
 
@@ -465,9 +470,16 @@ pub fn format_rows(rows: &[EvalRow]) -> String {
     let lines: Vec<(&str, String)> = vec![
         (
             "command",
-            col(&|r| match r.forward {
-                Some(v) => format!("vx {v:.2} m/s"),
-                None => "training mix".into(),
+            col(&|r| {
+                let command = match r.forward {
+                    Some(v) => format!("vx {v:.2} m/s"),
+                    None => "training mix".into(),
+                };
+                // The walk check's CoM-shift pass is held on its heading.
+                match r.condition {
+                    Some(_) => format!("hold {command}"),
+                    None => command,
+                }
             }),
         ),
         ("episodes", col(&|r| r.summary.episodes.to_string())),

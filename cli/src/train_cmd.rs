@@ -152,6 +152,9 @@ struct WalkCheck {
     /// `<run_dir>/walked/` — training goes on for a few iterations after a check starts.
     export: Vec<u8>,
     rows: Vec<crate::eval_cmd::EvalRow>,
+    /// Whether the robot's training randomisation shifts the base's centre of mass: its rows then
+    /// include a second pass at that shift with heading hold on ([`check_policy`]).
+    com_pass: bool,
     /// With `--sim2sim`, once `rows` pass: the MuJoCo verdict's failing bounds (empty: it walks
     /// there too) and the script's whole result.
     sim2sim: Option<(Vec<String>, serde_json::Value)>,
@@ -160,7 +163,8 @@ struct WalkCheck {
 impl WalkCheck {
     /// Whether the criterion holds at both speeds (and in MuJoCo, when it was asked).
     fn walks(&self) -> bool {
-        self.rows.len() == WALK_CHECK_SPEEDS.len()
+        let passes = if self.com_pass { 2 } else { 1 };
+        self.rows.len() == passes * WALK_CHECK_SPEEDS.len()
             && self.rows.iter().all(|r| r.walk_failures.is_empty())
             && self.sim2sim.as_ref().is_none_or(|(f, _)| f.is_empty())
     }
@@ -259,7 +263,8 @@ fn start_walk_check_in_two_simulators(
 
 /// Evaluates `<run_dir>/checkpoints/latest.ckpt` on the first actor's robot against the walk
 /// criterion: forward 0.5 and 1.0 m/s, joint damping pinned at the top of the training range,
-/// pushes off, the rest of the training randomisation on, physics at [`WALK_CHECK_PHYSICS_DT`].
+/// pushes off, the rest of the training randomisation on but for the centre-of-mass shift (its
+/// own pass: [`check_policy`]), physics at [`WALK_CHECK_PHYSICS_DT`].
 fn walk_check(config: &Config, run_dir: &std::path::Path) -> anyhow::Result<WalkCheck> {
     let (iteration, robot, export) = latest_export(config, run_dir)?;
     let policy = l3p_policy::DeployPolicy::from_bytes(&export)?;
@@ -281,6 +286,15 @@ pub fn walk_check_export(
 }
 
 /// The walk criterion's rows for `policy` (the harder speed first; the other only if it passes).
+///
+/// The heading bound asks a zero yaw command to mean zero yaw rate with heading hold off, which
+/// a policy can only do for the robot as described: a randomised lateral shift of the base's
+/// centre of mass (ANYmal's ±5 cm, IsaacLab's `base_com`) turns the robot by a bias it cannot
+/// observe (BENCHMARKS.md "Session 29"). So the first pass plays the robot at its nominal centre
+/// of mass, the rest of the training randomisation on; a robot trained with a shift then passes
+/// again at that shift with heading hold on (the yaw-rate command closes the heading, as
+/// `l3p deploy --heading-hold` does), every bound applying to both passes. A robot trained
+/// without a shift (Unitree, Spot) is checked exactly as before.
 fn check_policy(
     iteration: u64,
     export: Vec<u8>,
@@ -289,19 +303,68 @@ fn check_policy(
     mut env: l3p_task::config::EnvConfig,
 ) -> anyhow::Result<WalkCheck> {
     env.set_physics_dt(WALK_CHECK_PHYSICS_DT)?;
-    let mut rows = Vec::new();
-    // The harder speed first: while it fails (most checks) the other is not run, which halves a
-    // failing check's cost — checks share the training's cores (BENCHMARKS.md "session 10").
+    let (nominal, shifted) = walk_passes(env, robot.name);
+    let mut rows = check_speeds(robot, policy, &nominal, None)?;
+    let com_pass = shifted.is_some();
+    if let Some((env, condition)) = shifted
+        && rows.iter().all(|r| r.walk_failures.is_empty())
+    {
+        rows.extend(check_speeds(robot, policy, &env, Some(condition))?);
+    }
+    Ok(WalkCheck {
+        iteration,
+        export,
+        rows,
+        com_pass,
+        sim2sim: None,
+    })
+}
+
+/// The walk check's environments ([`check_policy`]): the robot at its nominal centre of mass,
+/// and, when its training randomisation shifts the centre of mass, that shift with the label of
+/// its pass (played with heading hold on).
+fn walk_passes(
+    env: l3p_task::config::EnvConfig,
+    robot: &str,
+) -> (
+    l3p_task::config::EnvConfig,
+    Option<(l3p_task::config::EnvConfig, String)>,
+) {
+    let trained_shift = env.randomization(robot).base_com_offset;
+    let mut nominal = env.clone();
+    nominal.randomization.base_com_offset = Some([0.0; 3]);
+    if trained_shift.iter().all(|h| *h == 0.0) {
+        return (nominal, None);
+    }
+    let cm = trained_shift.map(|h| format!("{:.0}", 100.0 * h));
+    let condition = format!(
+        "base CoM shifted as trained (±{}/{}/{} cm), heading hold on",
+        cm[0], cm[1], cm[2]
+    );
+    (nominal, Some((env, condition)))
+}
+
+/// One walk-check pass: rows at [`WALK_CHECK_SPEEDS`], the harder speed first (while it fails,
+/// as most checks do, the other is not run, which halves a failing check's cost — checks share
+/// the training's cores: BENCHMARKS.md "session 10"), in speed order. A pass with a `condition`
+/// holds the heading (the CoM-shift pass of [`check_policy`]).
+fn check_speeds(
+    robot: &'static l3p_robot::catalog::RobotSpec,
+    policy: &l3p_policy::DeployPolicy,
+    env: &l3p_task::config::EnvConfig,
+    condition: Option<String>,
+) -> anyhow::Result<Vec<crate::eval_cmd::EvalRow>> {
+    let mut rows: Vec<crate::eval_cmd::EvalRow> = Vec::new();
     for v in WALK_CHECK_SPEEDS.into_iter().rev() {
-        if rows
-            .iter()
-            .any(|r: &crate::eval_cmd::EvalRow| !r.walk_failures.is_empty())
-        {
+        if rows.iter().any(|r| !r.walk_failures.is_empty()) {
             break;
         }
         let mut e = env.clone();
         crate::eval_cmd::constant_forward_command(&mut e, v);
-        rows.push(crate::eval_cmd::evaluate_row(
+        if condition.is_some() {
+            crate::eval_cmd::hold_heading(&mut e);
+        }
+        let mut row = crate::eval_cmd::evaluate_row(
             robot,
             &e,
             policy,
@@ -310,15 +373,12 @@ fn check_policy(
             WALK_CHECK_SEED,
             Some(v),
             None,
-        )?);
+        )?;
+        row.condition = condition.clone();
+        rows.push(row);
     }
     rows.reverse();
-    Ok(WalkCheck {
-        iteration,
-        export,
-        rows,
-        sim2sim: None,
-    })
+    Ok(rows)
 }
 
 /// The latest checkpoint's iteration and deployable policy, its robot (the first actor's) and the
@@ -751,8 +811,13 @@ fn record_walk_check(check: &WalkCheck, wall_seconds: f64, run_dir: &std::path::
         "walk check"
     );
     for r in &check.rows {
+        let condition = r
+            .condition
+            .as_ref()
+            .map(|c| format!(" ({c})"))
+            .unwrap_or_default();
         for f in &r.walk_failures {
-            info!("  vx {:.1}: {f}", r.forward.unwrap_or(f32::NAN));
+            info!("  vx {:.1}{condition}: {f}", r.forward.unwrap_or(f32::NAN));
         }
     }
     if let Some((failures, _)) = &check.sim2sim {
@@ -931,5 +996,77 @@ mod tests {
             o.iter().zip(&om).any(|(x, y)| (x - y).abs() > 1e-3),
             "{o:?}"
         );
+    }
+
+    /// The heading bound is judged at the nominal centre of mass; a robot trained with a CoM shift
+    /// (ANYmal) passes again at that shift with heading hold on; one trained without (A1, Spot)
+    /// is checked in one pass, exactly as before the split.
+    #[test]
+    fn the_walk_check_judges_the_heading_at_the_nominal_com_and_the_shift_with_heading_hold() {
+        let config = Config::default();
+        let (nominal, shifted) = walk_passes(config.env.clone(), "anymal_c");
+        assert_eq!(nominal.randomization("anymal_c").base_com_offset, [0.0; 3]);
+        let (shifted, condition) = shifted.expect("ANYmal trains with a CoM shift");
+        let trained = config.env.randomization("anymal_c").base_com_offset;
+        assert!(trained.iter().any(|h| *h > 0.0), "{trained:?}");
+        assert_eq!(shifted.randomization("anymal_c").base_com_offset, trained);
+        assert!(condition.contains("±5/5/1 cm") && condition.contains("heading hold on"));
+        // Everything else is the training's randomisation in both.
+        let (mut a, mut b) = (
+            nominal.randomization("anymal_c"),
+            shifted.randomization("anymal_c"),
+        );
+        a.base_com_offset = [0.0; 3];
+        b.base_com_offset = [0.0; 3];
+        assert_eq!(a, b);
+        for robot in ["a1", "go1", "spot"] {
+            let (nominal, shifted) = walk_passes(config.env.clone(), robot);
+            assert!(shifted.is_none(), "{robot}");
+            assert_eq!(
+                nominal.randomization(robot),
+                config.env.randomization(robot),
+                "{robot}: the one pass is the old check"
+            );
+        }
+
+        // Two passes of two speeds must all be there and pass.
+        let row = |failures: &[&str], condition: Option<&str>| crate::eval_cmd::EvalRow {
+            forward: Some(1.0),
+            summary: l3p_actor::EvalSummary {
+                episodes: 16,
+                episode_return: 0.0,
+                episode_length: 0.0,
+                terrain_level: 0.0,
+                final_terrain_level: 0.0,
+                lin_vel_error: 0.1,
+                yaw_rate_error: 0.1,
+                fall_fraction: 0.0,
+                mean_base_height: None,
+                gait: None,
+            },
+            walk_failures: failures.iter().map(|f| f.to_string()).collect(),
+            condition: condition.map(str::to_string),
+        };
+        let check = |rows, com_pass| WalkCheck {
+            iteration: 5,
+            export: Vec::new(),
+            rows,
+            com_pass,
+            sim2sim: None,
+        };
+        let nominal_pass = || vec![row(&[], None), row(&[], None)];
+        assert!(check(nominal_pass(), false).walks());
+        assert!(
+            !check(nominal_pass(), true).walks(),
+            "the shift pass is missing"
+        );
+        let mut both = nominal_pass();
+        both.extend([row(&[], Some("hold")), row(&[], Some("hold"))]);
+        assert!(check(both.clone(), true).walks());
+        both[3] = row(
+            &["heading changes 20° per episode (want <= 15°)"],
+            Some("hold"),
+        );
+        assert!(!check(both, true).walks());
     }
 }

@@ -1,8 +1,10 @@
 //! Collision meshes read for [`crate::urdf::load_urdf_file`]: a `<mesh>` whose file is found
 //! beside the URDF becomes a convex-hull collider ([`crate::model::ShapeSpec::ConvexHull`]).
 //!
-//! - Formats: binary and ASCII STL, Wavefront OBJ (its `v` lines only). Collada (`.dae`) and
-//!   any other format is not read: the loader's stand-ins replace it, with a warning saying so.
+//! - Formats: binary and ASCII STL, Wavefront OBJ (its `v` lines only), Collada (`.dae`, its
+//!   mesh positions placed by its scene's node transforms and scaled by its unit, as ROS reads it:
+//!   [`collada`]). Any other format is not read: the loader's stand-ins replace it, with a
+//!   warning saying so.
 //! - Paths ([`resolve`]): a plain path is relative to the URDF's directory; `file://` is an
 //!   absolute path; `package://pkg/rest` is the first file found of `<urdf dir>/rest`,
 //!   `<urdf dir>/../rest`, then `<d>/pkg/rest` for `d` the URDF's directory and each of its
@@ -23,6 +25,8 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 
 use crate::math::Vec3;
+
+pub mod collada;
 
 /// Most points a hull collider keeps.
 pub const MAX_HULL_POINTS: usize = 128;
@@ -103,11 +107,10 @@ pub fn read_vertices(path: &Path) -> Result<Vec<Vec3>, String> {
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase())
         .unwrap_or_default();
-    if !matches!(ext.as_str(), "stl" | "obj") {
+    if !matches!(ext.as_str(), "stl" | "obj" | "dae") {
         return Err(match ext.as_str() {
-            "dae" => "Collada (.dae) is not read: only STL and OBJ meshes are".into(),
-            "" => "no file extension: only STL and OBJ meshes are read".into(),
-            other => format!("`.{other}` is not read: only STL and OBJ meshes are"),
+            "" => "no file extension: only STL, OBJ and Collada meshes are read".into(),
+            other => format!("`.{other}` is not read: only STL, OBJ and Collada (.dae) meshes are"),
         });
     }
     let size = std::fs::metadata(path).map_err(|e| e.to_string())?.len();
@@ -118,9 +121,13 @@ pub fn read_vertices(path: &Path) -> Result<Vec<Vec3>, String> {
     }
     let bytes = std::fs::read(path).map_err(|e| e.to_string())?;
     if ext == "stl" {
-        stl_vertices(&bytes)
+        return stl_vertices(&bytes);
+    }
+    let text = std::str::from_utf8(&bytes)
+        .map_err(|e| format!("{} is not UTF-8: {e}", ext.to_ascii_uppercase()))?;
+    if ext == "dae" {
+        collada::vertices(text)
     } else {
-        let text = std::str::from_utf8(&bytes).map_err(|e| format!("OBJ is not UTF-8: {e}"))?;
         obj_vertices(text)
     }
 }

@@ -18,7 +18,7 @@
 //!    such a load returned ([`load_urdf_file_with_hulls`] → [`load_urdf_str_with_hulls`]: an added
 //!    robot, whose description records them) gets the same hulls. Any other mesh collider — a
 //!    URDF loaded from text alone ([`load_urdf_str`]: no directory to look in), a missing file,
-//!    Collada, an unreadable, empty, flat or non-finite mesh (a warning names the file and why) — gets
+//!    an unread format, an unreadable, empty, flat or non-finite mesh (a warning names the file and why) — gets
 //!    primitive stand-ins, [`MeshStandIn`]: on a leg link, capsules along the link's
 //!    joint-to-child segments with a radius from its inertia, stopping short of a foot's shapes,
 //!    so that no stand-in hangs below the feet; on the trunk and on leaf links (nothing to run a
@@ -810,10 +810,15 @@ impl<'a> Builder<'a> {
                 urdf_rs::Geometry::Mesh { filename, .. }
                     if let Some(points) = self.hull(li, ci).map(<[Vec3]>::to_vec) =>
                 {
+                    let (points, trim) = match body {
+                        0 => (points, None),
+                        _ => self.trim_at_tips(li, &pose_of(&col.origin), points),
+                    };
                     self.warnings.push(format!(
-                        "link `{}`: mesh `{filename}` used as a convex hull of {} points",
+                        "link `{}`: mesh `{filename}` used as a convex hull of {} points{}",
                         link.name,
-                        points.len()
+                        points.len(),
+                        trim.map(|t| format!(" ({t})")).unwrap_or_default()
                     ));
                     Some(ShapeSpec::ConvexHull { points })
                 }
@@ -968,6 +973,72 @@ impl<'a> Builder<'a> {
             });
         }
         out
+    }
+
+    /// A leg link's mesh hull (`points` in the collision frame `origin` of link `li`) cut off at
+    /// the top of a tip's shapes — the plane across each segment to a fixed child with shapes (a
+    /// foot), at the segment's length less the shapes' extent, where the capsule stand-ins stop —
+    /// and a note saying so. A vendor's shank mesh often holds its foot: its hull then
+    /// reaches as low as the foot's sphere and takes the ground contact (and the foot's role) from
+    /// it whenever the shank tilts (Unitree B1's calves carried 20% of its weight standing). A
+    /// hull that would lose its volume is kept whole, with a note.
+    fn trim_at_tips(
+        &self,
+        li: usize,
+        origin: &Pose,
+        points: Vec<Vec3>,
+    ) -> (Vec<Vec3>, Option<String>) {
+        let cuts: Vec<(Vec3, f32, String)> = self
+            .segment_ends(li, Pose::IDENTITY, 0)
+            .into_iter()
+            .filter(|s| s.clearance > 0.0 && s.end.length() >= 1e-3)
+            .map(|s| {
+                let length = s.end.length();
+                (s.end / length, length - s.clearance, s.child)
+            })
+            .collect();
+        // The hull cut by each plane: the points on the near side, and where every segment
+        // between a near and a far point crosses the plane (every edge of the hull is such a
+        // segment, so these hold the cut face's corners).
+        let mut kept: Vec<Vec3> = points.clone();
+        for (u, at, _) in &cuts {
+            let axial = |p: &Vec3| (*origin * *p).dot(*u);
+            let (near, far): (Vec<Vec3>, Vec<Vec3>) = kept.iter().partition(|p| axial(p) <= *at);
+            if far.is_empty() {
+                continue;
+            }
+            let mut next = near.clone();
+            for a in &near {
+                for b in &far {
+                    let (da, db) = (axial(a), axial(b));
+                    next.push(*a + (*b - *a) * ((at - da) / (db - da)));
+                }
+            }
+            kept = next;
+        }
+        if kept == points {
+            return (points, None);
+        }
+        let tips: Vec<String> = cuts
+            .iter()
+            .map(|(_, at, child)| format!("`{child}` at {at:.3} m"))
+            .collect();
+        match crate::mesh::hull_points(&kept, Vec3::ONE) {
+            Ok(kept) => (
+                kept,
+                Some(format!(
+                    "cut short of its tip's shapes: at {}",
+                    tips.join(", ")
+                )),
+            ),
+            Err(why) => (
+                points,
+                Some(format!(
+                    "kept whole: cut at {} it would be no hull ({why})",
+                    tips.join(", ")
+                )),
+            ),
+        }
     }
 
     /// Radius about link `li`'s frame that holds its shapes and those of the links fixed below

@@ -1,4 +1,4 @@
-//! Collision meshes beside a URDF (issue 44): STL (binary and ASCII) and OBJ files found from
+//! Collision meshes beside a URDF (issue 44): STL (binary and ASCII), OBJ and Collada files found from
 //! the URDF's directory are convex hulls of their scaled vertices; a missing, unreadable or flat
 //! mesh falls back to the primitive stand-ins with a warning naming the file; a robot standing
 //! on calf meshes carries its weight on its feet; a robot added from such a URDF keeps its hulls in
@@ -107,6 +107,43 @@ fn obj(triangles: &[Triangle]) -> String {
     out
 }
 
+/// A Collada file in millimetres (`<unit meter="0.001">`) whose scene places the triangles'
+/// mesh 5 mm up through a nested node (ROS reads it so: unit and node transforms applied,
+/// `up_axis` ignored).
+fn collada_mm(triangles: &[Triangle]) -> String {
+    let positions: Vec<String> = triangles
+        .iter()
+        .flatten()
+        .flatten()
+        .map(f32::to_string)
+        .collect();
+    let n = 3 * triangles.len();
+    format!(
+        r##"<?xml version="1.0"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+  <asset><unit name="millimeter" meter="0.001"/><up_axis>Y_UP</up_axis></asset>
+  <library_geometries><geometry id="part-mesh"><mesh>
+    <source id="part-positions">
+      <float_array id="part-positions-array" count="{}">{}</float_array>
+      <technique_common><accessor source="#part-positions-array" count="{n}" stride="3"/></technique_common>
+    </source>
+    <vertices id="part-vertices"><input semantic="POSITION" source="#part-positions"/></vertices>
+    <triangles count="{}"><input semantic="VERTEX" source="#part-vertices" offset="0"/><p>{}</p></triangles>
+  </mesh></geometry></library_geometries>
+  <library_visual_scenes><visual_scene id="Scene">
+    <node id="outer"><translate>0 0 2</translate>
+      <node id="inner"><translate>0 0 3</translate><instance_geometry url="#part-mesh"/></node>
+    </node>
+  </visual_scene></library_visual_scenes>
+  <scene><instance_visual_scene url="#Scene"/></scene>
+</COLLADA>"##,
+        3 * n,
+        positions.join(" "),
+        triangles.len(),
+        (0..n).map(|i| i.to_string()).collect::<Vec<_>>().join(" "),
+    )
+}
+
 fn write(path: &Path, bytes: impl AsRef<[u8]>) {
     std::fs::create_dir_all(path.parent().unwrap()).unwrap();
     std::fs::write(path, bytes).unwrap();
@@ -171,7 +208,7 @@ fn warned(model: &RobotModel, parts: &[&str]) -> bool {
 }
 
 #[test]
-fn stl_and_obj_meshes_beside_a_urdf_are_convex_hulls_of_their_scaled_vertices() {
+fn stl_obj_and_collada_meshes_beside_a_urdf_are_convex_hulls_of_their_scaled_vertices() {
     let tmp = tempfile::tempdir().unwrap();
     // A ROS package layout: the URDF in `desc/urdf`, its meshes in `desc/meshes`; another
     // package beside it in the workspace.
@@ -189,6 +226,10 @@ fn stl_and_obj_meshes_beside_a_urdf_are_convex_hulls_of_their_scaled_vertices() 
     write(
         &tmp.path().join("src/other/meshes/part.obj"),
         obj(&box_triangles([0.01, 0.02, 0.03])),
+    );
+    write(
+        &desc.join("meshes/part.DAE"),
+        collada_mm(&box_triangles([10.0, 20.0, 30.0])),
     );
     let absolute = tmp.path().join("abs.obj");
     write(&absolute, obj(&box_triangles([0.05, 0.05, 0.05])));
@@ -209,6 +250,10 @@ fn stl_and_obj_meshes_beside_a_urdf_are_convex_hulls_of_their_scaled_vertices() 
         (
             "absolute",
             format!(r#"<mesh filename="file://{}"/>"#, absolute.display()),
+        ),
+        (
+            "collada",
+            r#"<mesh filename="package://desc/meshes/part.DAE" scale="1 1 2"/>"#.into(),
         ),
     ]);
     let path = urdf_dir.join("robot.urdf");
@@ -243,6 +288,13 @@ fn stl_and_obj_meshes_beside_a_urdf_are_convex_hulls_of_their_scaled_vertices() 
     assert_close(hi, [0.01, 0.02, 0.03], "obj high");
     let (_, hi) = bounds(hull_of(&model, "absolute"));
     assert_close(hi, [0.05, 0.05, 0.05], "file:// high");
+    // Collada: its unit (mm) and its nodes' 5 mm lift applied, then the URDF's scale (z x 2).
+    let points = hull_of(&model, "collada");
+    assert_eq!(points.len(), 8, "{points:?}");
+    let (lo, hi) = bounds(points);
+    assert_close(lo, [-0.01, -0.02, -0.05], "collada low");
+    assert_close(hi, [0.01, 0.02, 0.07], "collada high");
+    assert!(warned(&model, &["`collada`", "convex hull of 8 points"]));
     assert!(!warned(&model, &["not used"]), "{:#?}", model.warnings);
     // The hull sits at its collision origin: lowest point 5 cm + half its height below the link.
     let (b, _) = model.body_of_link("binary").unwrap();
@@ -348,7 +400,9 @@ const CALF_MESH: &str = "package://a1_description/meshes/calf.stl";
 
 /// A1's URDF named `name` with its four calf capsules as one STL mesh in millimetres (a 16-sided
 /// prism of the capsule's radius along its straight part, closed by cones to its ends), written
-/// as a ROS package under `dir`; returns the URDF's path.
+/// as a ROS package under `dir`; returns the URDF's path. Like a vendor's shank mesh that holds
+/// its foot (Unitree B1's), the lower cone reaches the bottom of the foot's sphere (2 cm below
+/// the foot at 0.2 m).
 fn a1_with_calf_meshes(dir: &Path, name: &str) -> std::path::PathBuf {
     let spec = RobotSpec::by_name("a1").unwrap();
     let capsule = r#"<geometry><capsule radius="0.012" length="0.176"/></geometry>"#;
@@ -365,7 +419,7 @@ fn a1_with_calf_meshes(dir: &Path, name: &str) -> std::path::PathBuf {
     let pkg = dir.join("a1_description");
     write(
         &pkg.join("meshes/calf.stl"),
-        binary_stl(&prism_triangles(12.0, 88.0, 12.0, 16)),
+        binary_stl(&prism_triangles(12.0, 88.0, 32.0, 16)),
     );
     let path = pkg.join("urdf/a1.urdf");
     write(&path, &text);
@@ -390,10 +444,23 @@ fn a1_with_calf_meshes_stands_on_its_feet_and_its_hulls() {
     for leg in ["FL", "FR", "RL", "RR"] {
         let calf = format!("{leg}_calf");
         let points = hull_of(&model, &calf);
-        assert_eq!(points.len(), 34, "{calf}");
+        assert!(points.len() <= MAX_HULL_POINTS, "{calf}: {}", points.len());
+        // Cut where the capsule stand-ins stop: the foot (0.2 m down the shank) less its sphere's
+        // 2 cm, i.e. 8 cm below the mesh's origin at 0.1 m; the knee end is the mesh's own.
+        let (lo, hi) = bounds(points);
+        assert!((lo[2] + 0.08).abs() < 2e-4, "{calf}: lowest {lo:?}");
+        assert!((hi[2] - 0.12).abs() < 2e-4, "{calf}: highest {hi:?}");
+        // The shank keeps its width down to the cut.
+        assert!(
+            (hi[0] - 0.012).abs() < 2e-4 && (lo[0] + 0.012).abs() < 2e-4,
+            "{lo:?} {hi:?}"
+        );
         assert!(warned(
             &model,
-            &[&format!("link `{calf}`: mesh"), "convex hull of 34 points"]
+            &[
+                &format!("link `{calf}`: mesh"),
+                &format!("cut short of its tip's shapes: `{leg}_foot` at 0.180 m")
+            ]
         ));
     }
     // The hulls end where the capsules did: the same standing height.
@@ -443,14 +510,15 @@ fn an_added_robot_keeps_its_mesh_hulls_where_only_its_description_and_urdf_text_
     let d = &inferred.description;
 
     // The description round-trips through its TOML, the hulls readable in it: points in metres
-    // on the 0.1 mm grid (the prism's 12 mm radius, its apexes 100 mm out).
+    // on the 0.1 mm grid (the prism's 12 mm radius, its apexes 120 mm out; the mesh's own hull,
+    // cut short of the feet only when the model is built).
     let toml_text = d.to_toml();
     assert!(toml_text.contains("[[mesh_hulls]]"), "{toml_text}");
     assert!(
         toml_text.contains(&format!("file = \"{CALF_MESH}\"")),
         "{toml_text}"
     );
-    assert!(toml_text.contains("[0.0, 0.0, 0.1]"), "{toml_text}");
+    assert!(toml_text.contains("[0.0, 0.0, 0.12]"), "{toml_text}");
     assert!(toml_text.contains("0.012"), "{toml_text}");
     let back: RobotDescription = toml::from_str(&toml_text).unwrap();
     assert_eq!(&back, d);
@@ -471,7 +539,11 @@ fn an_added_robot_keeps_its_mesh_hulls_where_only_its_description_and_urdf_text_
     assert_eq!(colliders(&registered), colliders(&model));
     for leg in ["FL", "FR", "RL", "RR"] {
         let calf = format!("{leg}_calf");
-        assert_eq!(hull_of(&registered, &calf).len(), 34, "{calf}");
+        assert_eq!(
+            hull_of(&registered, &calf),
+            hull_of(&model, &calf),
+            "{calf}"
+        );
         assert!(warned(
             &registered,
             &[&format!("link `{calf}`: mesh `{CALF_MESH}`"), "convex hull"]
