@@ -278,12 +278,18 @@ pub fn constant_command(env: &mut l3p_task::config::EnvConfig, vx: f32, vy: f32,
     env.commands.rel_standing_envs = 0.0;
 }
 
-/// Every command in heading mode, holding the heading it starts with (yaw rate clipped at ±1).
+/// Every command in heading mode, holding the heading it starts with (yaw rate clipped at ±1),
+/// one command per episode: as `l3p deploy --heading-hold` holds the heading the base had when the
+/// yaw command became zero, a resampled command must not take the heading the robot has drifted
+/// to as its new target (a 10 s resampling doubled ANYmal-C's held heading change, 11-13° to
+/// 18-22° per 20 s: BENCHMARKS.md "Session 34").
 pub fn hold_heading(env: &mut l3p_task::config::EnvConfig) {
     env.commands.ang_vel_z = [-1.0, 1.0];
     env.commands.heading_command = true;
     env.commands.rel_heading_envs = 1.0;
     env.commands.heading_hold = true;
+    let once = 2.0 * env.episode_length_s;
+    env.commands.resampling_time_s = [once, once];
 }
 
 /// Plays `policy` on `robot` with `env` and applies the walk criterion; the observation contract,

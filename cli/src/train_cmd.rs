@@ -1029,6 +1029,13 @@ mod tests {
             );
         }
 
+        // The held pass holds one heading per episode, as deploy's heading hold does: no command
+        // resampled mid-episode takes the heading the robot drifted to as its new target.
+        let mut held = shifted.clone();
+        crate::eval_cmd::hold_heading(&mut held);
+        assert!(held.commands.heading_hold && held.commands.rel_heading_envs == 1.0);
+        assert!(held.commands.resampling_time_s[0] > held.episode_length_s);
+
         // Two passes of two speeds must all be there and pass.
         let row = |failures: &[&str], condition: Option<&str>| crate::eval_cmd::EvalRow {
             forward: Some(1.0),
