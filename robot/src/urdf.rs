@@ -975,10 +975,10 @@ impl<'a> Builder<'a> {
         out
     }
 
-    /// A leg link's mesh hull (`points` in the collision frame `origin` of link `li`) cut off at
-    /// the top of a tip's shapes — the plane across each segment to a fixed child with shapes (a
-    /// foot), at the segment's length less the shapes' extent, where the capsule stand-ins stop —
-    /// and a note saying so. A vendor's shank mesh often holds its foot: its hull then
+    /// A shank's mesh hull (`points` in the collision frame `origin` of link `li`, a leg link with
+    /// no moving joint below it) cut off at the top of a tip's shapes — the plane across each
+    /// segment to a fixed child with shapes (a foot), at the segment's length less the shapes'
+    /// extent, where the capsule stand-ins stop — and a note saying so. A vendor's shank mesh often holds its foot: its hull then
     /// reaches as low as the foot's sphere and takes the ground contact (and the foot's role) from
     /// it whenever the shank tilts (Unitree B1's calves carried 20% of its weight standing). A
     /// hull that would lose its volume is kept whole, with a note.
@@ -988,6 +988,18 @@ impl<'a> Builder<'a> {
         origin: &Pose,
         points: Vec<Vec3>,
     ) -> (Vec<Vec3>, Option<String>) {
+        // Only a chain's last moving link holds a foot: a thigh's fixed children are rotors and
+        // the like (B1's `FL_calf_rotor` sits 1 mm from the thigh's origin), not where it ends.
+        let robot = self.robot;
+        let moves_on = self
+            .children
+            .get(robot.links[li].name.as_str())
+            .into_iter()
+            .flatten()
+            .any(|&ji| !matches!(robot.joints[ji].joint_type, urdf_rs::JointType::Fixed));
+        if moves_on {
+            return (points, None);
+        }
         let cuts: Vec<(Vec3, f32, String)> = self
             .segment_ends(li, Pose::IDENTITY, 0)
             .into_iter()
