@@ -978,10 +978,11 @@ impl<'a> Builder<'a> {
     /// A shank's mesh hull (`points` in the collision frame `origin` of link `li`, a leg link with
     /// no moving joint below it) cut off at the top of a tip's shapes — the plane across each
     /// segment to a fixed child with shapes (a foot), at the segment's length less the shapes'
-    /// extent, where the capsule stand-ins stop — and a note saying so. A vendor's shank mesh often holds its foot: its hull then
-    /// reaches as low as the foot's sphere and takes the ground contact (and the foot's role) from
-    /// it whenever the shank tilts (Unitree B1's calves carried 20% of its weight standing). A
-    /// hull that would lose its volume is kept whole, with a note.
+    /// extent, where the capsule stand-ins stop — and a note saying so. A vendor's shank mesh
+    /// often holds its foot: its hull then reaches as low as the foot's sphere and takes the
+    /// ground contact (and the foot's role) from it whenever the shank tilts (Unitree B1's calves
+    /// carried 20% of its weight standing). A hull that would lose its volume is kept whole, with
+    /// a note.
     fn trim_at_tips(
         &self,
         li: usize,
@@ -1039,7 +1040,7 @@ impl<'a> Builder<'a> {
             Ok(kept) => (
                 kept,
                 Some(format!(
-                    "cut short of its tip's shapes: at {}",
+                    "cut short of its tip's shapes: {}",
                     tips.join(", ")
                 )),
             ),
