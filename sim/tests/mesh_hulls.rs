@@ -486,6 +486,69 @@ fn a1_with_calf_meshes_stands_on_its_feet_and_its_hulls() {
     );
 }
 
+/// Only a chain's last moving link is cut at its foot: a thigh whose fixed child is a rotor (B1
+/// has one 1 mm from the thigh's origin) keeps its whole hull, and the shank below it is cut.
+#[test]
+fn a_thigh_with_a_rotor_keeps_its_hull_and_only_the_shank_is_cut_at_its_foot() {
+    let tmp = tempfile::tempdir().unwrap();
+    write(
+        &tmp.path().join("box.stl"),
+        binary_stl(&box_triangles([0.02, 0.02, 0.1])),
+    );
+    let link = |name: &str, geometry: &str| {
+        format!(
+            r#"<link name="{name}">{INERTIAL}<collision><origin xyz="0 0 -0.1"/><geometry>{geometry}</geometry></collision></link>"#
+        )
+    };
+    let mesh = r#"<mesh filename="box.stl"/>"#;
+    let joint = |name: &str, kind: &str, parent: &str, child: &str, z: f32| {
+        let limit = if kind == "fixed" {
+            ""
+        } else {
+            r#"<axis xyz="0 1 0"/><limit lower="-1" upper="1" effort="10" velocity="10"/>"#
+        };
+        format!(
+            r#"<joint name="{name}" type="{kind}"><parent link="{parent}"/><child link="{child}"/><origin xyz="0 0 {z}"/>{limit}</joint>"#
+        )
+    };
+    let text = format!(
+        r#"<robot name="rotors"><link name="base">{INERTIAL}<collision><geometry><box size="0.3 0.2 0.1"/></geometry></collision></link>{}{}{}{}{}{}{}{}</robot>"#,
+        link("thigh", mesh),
+        r#"<link name="rotor"><inertial><mass value="0.1"/><inertia ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial><collision><geometry><cylinder radius="0.03" length="0.02"/></geometry></collision></link>"#,
+        link("shank", mesh),
+        r#"<link name="foot"><inertial><mass value="0.05"/><inertia ixx="1e-5" ixy="0" ixz="0" iyy="1e-5" iyz="0" izz="1e-5"/></inertial><collision><geometry><sphere radius="0.02"/></geometry></collision></link>"#,
+        joint("hip", "revolute", "base", "thigh", -0.05),
+        joint("rotor_fixed", "fixed", "thigh", "rotor", -0.001),
+        joint("knee", "revolute", "thigh", "shank", -0.2),
+        joint("foot_fixed", "fixed", "shank", "foot", -0.2),
+    );
+    let path = tmp.path().join("rotors.urdf");
+    write(&path, &text);
+    let model = load_urdf_file(&path).unwrap();
+    // The thigh: the box's 8 corners, 0 to 0.2 m down.
+    let thigh = hull_of(&model, "thigh");
+    assert_eq!(thigh.len(), 8, "{thigh:?}");
+    let (lo, hi) = bounds(thigh);
+    assert_close(lo, [-0.02, -0.02, -0.1], "thigh low");
+    assert_close(hi, [0.02, 0.02, 0.1], "thigh high");
+    // The shank: cut where its foot's sphere begins, 0.18 m down (0.08 below the mesh's origin).
+    let (lo, hi) = bounds(hull_of(&model, "shank"));
+    assert!((lo[2] + 0.08).abs() < 2e-4, "shank low {lo:?}");
+    assert_close(hi, [0.02, 0.02, 0.1], "shank high");
+    assert!(warned(
+        &model,
+        &[
+            "link `shank`",
+            "cut short of its tip's shapes: `foot` at 0.180 m"
+        ]
+    ));
+    assert!(
+        !warned(&model, &["link `thigh`", "cut short"]),
+        "{:#?}",
+        model.warnings
+    );
+}
+
 #[test]
 fn an_added_robot_keeps_its_mesh_hulls_where_only_its_description_and_urdf_text_travel() {
     let meshes = tempfile::tempdir().unwrap();
