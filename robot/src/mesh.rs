@@ -251,6 +251,38 @@ pub fn hull_points(vertices: &[Vec3], scale: Vec3) -> Result<Vec<Vec3>, String> 
     Ok(points)
 }
 
+/// The corners of the convex hull of `points`, which lie in one plane with unit `normal`: its
+/// 2-D hull (Andrew's monotone chain) in a basis of that plane, corners in order, collinear
+/// points dropped. Where a hull is cut by a plane, the crossings of its point pairs fill the cut
+/// face; only the face's corners are needed.
+pub fn hull_in_plane(points: &[Vec3], normal: Vec3) -> Vec<Vec3> {
+    let (a, b) = normal.any_orthonormal_pair();
+    let mut flat: Vec<(f32, f32, Vec3)> = points.iter().map(|p| (p.dot(a), p.dot(b), *p)).collect();
+    flat.sort_by(|p, q| p.0.total_cmp(&q.0).then(p.1.total_cmp(&q.1)));
+    flat.dedup_by(|p, q| p.0 == q.0 && p.1 == q.1);
+    if flat.len() < 3 {
+        return flat.into_iter().map(|p| p.2).collect();
+    }
+    let turn = |o: &(f32, f32, Vec3), p: &(f32, f32, Vec3), q: &(f32, f32, Vec3)| {
+        (p.0 - o.0) * (q.1 - o.1) - (p.1 - o.1) * (q.0 - o.0)
+    };
+    let mut hull: Vec<(f32, f32, Vec3)> = Vec::with_capacity(2 * flat.len());
+    for pass in [flat.clone(), flat.iter().rev().copied().collect::<Vec<_>>()] {
+        let start = hull.len();
+        for p in pass {
+            while hull.len() >= start + 2
+                && turn(&hull[hull.len() - 2], &hull[hull.len() - 1], &p) <= 0.0
+            {
+                hull.pop();
+            }
+            hull.push(p);
+        }
+        // The last point of each chain is the first of the next.
+        hull.pop();
+    }
+    hull.into_iter().map(|p| p.2).collect()
+}
+
 /// The most extreme of `points` along each of `n` fixed directions, without repeats: the six
 /// axis directions, then a Fibonacci lattice on the sphere.
 fn extreme_points(points: &[Vec3], n: usize) -> Vec<Vec3> {

@@ -1020,14 +1020,17 @@ impl<'a> Builder<'a> {
             if far.is_empty() {
                 continue;
             }
-            let mut next = near.clone();
+            let mut crossings = Vec::with_capacity(near.len() * far.len());
             for a in &near {
                 for b in &far {
                     let (da, db) = (axial(a), axial(b));
-                    next.push(*a + (*b - *a) * ((at - da) / (db - da)));
+                    crossings.push(*a + (*b - *a) * ((at - da) / (db - da)));
                 }
             }
-            kept = next;
+            // Only the cut face's corners: the plane's normal in the collision frame.
+            let normal = origin.rotation.inverse() * *u;
+            kept = near;
+            kept.extend(crate::mesh::hull_in_plane(&crossings, normal));
         }
         if kept == points {
             return (points, None);
